@@ -1,0 +1,21 @@
+# The README's two commands: `make demo` and `make test`. Each sets itself up on first use.
+VENV ?= .venv
+PYTEST_ARGS ?=
+
+.PHONY: setup demo test bench clean
+
+setup:
+	@scripts/setup.sh $(VENV)
+
+demo: setup
+	$(VENV)/bin/woody run --fillets 12 --out bags/demo
+
+test: setup
+	$(VENV)/bin/python -m pytest tests $(PYTEST_ARGS)
+
+bench: setup
+	$(VENV)/bin/woody bench sim
+	$(VENV)/bin/woody bench vision
+
+clean:
+	rm -rf ros_ws/build ros_ws/log

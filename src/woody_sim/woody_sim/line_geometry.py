@@ -1,0 +1,177 @@
+"""Where everything on the line sits: one source of truth for the sim, renderer and defaults.
+
+Frames follow REP 103. The world frame ``world`` has x downstream along the
+belt, y to the left across the belt, z up; SI units throughout. The flat belt
+top is the plane z = 0 and ends at x = 0 (the *roller edge*), where it wraps
+around the end roller whose axle runs along y at (x = 0, z = -R).
+
+Camera optical frames follow REP 103's ``_optical_frame`` convention (z
+forward, x right, y down in the image):
+
+* top camera, nadir, at (x_c, 0, H): optical x = world +y, optical y = world
+  +x, optical z = world -z. Fillets therefore move *down* the image and the
+  roller edge is the image row v = cy + fy * (0 - x_c) / H. Lane 0 (the
+  most positive y) is on the right of the image.
+* side camera at (x_s, y_lane - D, z_s) looking along +y at one lane: optical
+  x = world +x (downstream to the right), optical y = world -z (down is down),
+  optical z = world +y.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FPM_TO_MPS = 0.3048 / 60.0
+"""Feet per minute to metres per second (100 FPM = 0.508 m/s)."""
+
+
+def fpm_to_mps(speed_fpm: float) -> float:
+    """Convert the user-facing line speed in feet per minute to m/s."""
+    return float(speed_fpm) * FPM_TO_MPS
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """An ideal pinhole camera: intrinsics plus its pose in the world frame."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    position: tuple[float, float, float]
+    """Optical centre in the world frame (m)."""
+    rotation: tuple[tuple[float, float, float], ...]
+    """3x3 matrix whose columns are the optical x, y, z axes in world coordinates."""
+    near: float = 0.05
+    far: float = 3.0
+
+    @property
+    def k(self) -> np.ndarray:
+        """The 3x3 intrinsic matrix K."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def world_to_optical(self, points: np.ndarray) -> np.ndarray:
+        """Transform (N, 3) world points into the optical frame."""
+        r = np.asarray(self.rotation, dtype=float)
+        return (np.asarray(points, dtype=float) - np.asarray(self.position)) @ r
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Project (N, 3) world points to (N, 2) pixel coordinates (u, v)."""
+        p = self.world_to_optical(points)
+        return np.stack([self.fx * p[:, 0] / p[:, 2] + self.cx, self.fy * p[:, 1] / p[:, 2] + self.cy], axis=1)
+
+
+@dataclass(frozen=True)
+class LineGeometry:
+    """Dimensions of the conveyor, lanes and cameras (metres, radians)."""
+
+    lanes: int = 3
+    lane_pitch: float = 0.16
+    roller_radius: float = 0.05
+    belt_length: float = 1.4
+    belt_margin: float = 0.08
+    """Extra belt width beyond the outer lanes, each side."""
+    floor_z: float = -0.6
+    """The catch floor below the roller: what the top camera sees past the edge."""
+    spawn_x: float = -1.0
+    """Centre of a freshly spawned fillet along the belt."""
+    remove_z: float = -0.35
+    """A fillet whose every segment is below this height has fallen and is removed."""
+
+    top_height: float = 0.75
+    top_center_x: float = -0.20
+    top_width: int = 672
+    top_height_px: int = 376
+    top_hfov: float = math.radians(85.0)
+
+    side_distance: float = 1.0
+    side_center_x: float = 0.0
+    side_center_z: float = -0.10
+    side_width: int = 960
+    side_height_px: int = 696
+    side_lane: int = -1
+    """Lane the side camera watches; -1 means the centre lane."""
+    side_hfov: float = 2.0 * math.atan(480.0 / 960.0)
+
+    extra: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.lanes <= 6:
+            raise ValueError(f"lanes must be 1..6, got {self.lanes}")
+
+    @property
+    def belt_width(self) -> float:
+        return self.lanes * self.lane_pitch + 2.0 * self.belt_margin
+
+    def lane_y(self, lane: int) -> float:
+        """Centre of a lane across the belt; lane 0 is the most positive y (left)."""
+        if not 0 <= lane < self.lanes:
+            raise ValueError(f"lane must be 0..{self.lanes - 1}, got {lane}")
+        return ((self.lanes - 1) / 2.0 - lane) * self.lane_pitch
+
+    def lane_of_y(self, y: float) -> int:
+        """The lane whose centre is nearest to a world y coordinate."""
+        lane = round((self.lanes - 1) / 2.0 - y / self.lane_pitch)
+        return int(min(max(lane, 0), self.lanes - 1))
+
+    @property
+    def watched_lane(self) -> int:
+        return (self.lanes - 1) // 2 if self.side_lane < 0 else self.side_lane
+
+    @property
+    def roller_axle(self) -> tuple[float, float]:
+        """(x, z) of the roller axle in the world frame."""
+        return (0.0, -self.roller_radius)
+
+    def top_camera(self) -> PinholeCamera:
+        fx = (self.top_width / 2.0) / math.tan(self.top_hfov / 2.0)
+        return PinholeCamera(
+            width=self.top_width,
+            height=self.top_height_px,
+            fx=fx,
+            fy=fx,
+            cx=self.top_width / 2.0,
+            cy=self.top_height_px / 2.0,
+            position=(self.top_center_x, 0.0, self.top_height),
+            rotation=((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, -1.0)),
+            near=0.05,
+            far=self.top_height - self.floor_z + 0.5,
+        )
+
+    def side_camera(self) -> PinholeCamera:
+        fx = (self.side_width / 2.0) / math.tan(self.side_hfov / 2.0)
+        y = self.lane_y(self.watched_lane) - self.side_distance
+        return PinholeCamera(
+            width=self.side_width,
+            height=self.side_height_px,
+            fx=fx,
+            fy=fx,
+            cx=self.side_width / 2.0,
+            cy=self.side_height_px / 2.0,
+            position=(self.side_center_x, y, self.side_center_z),
+            rotation=((1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, -1.0, 0.0)),
+            near=0.1,
+            far=self.side_distance + 1.0,
+        )
+
+    def top_edge_row(self) -> float:
+        """Image row of the roller edge in the top camera (nadir view)."""
+        cam = self.top_camera()
+        return cam.cy + cam.fy * (0.0 - self.top_center_x) / self.top_height
+
+    def side_axle_pixel(self) -> tuple[float, float]:
+        """(u, v) of the roller axle in the side camera image."""
+        cam = self.side_camera()
+        ax, az = self.roller_axle
+        uv = cam.project(np.array([[ax, self.lane_y(self.watched_lane), az]]))[0]
+        return float(uv[0]), float(uv[1])
+
+    def side_roller_radius_px(self) -> float:
+        """Roller radius in side-camera pixels at the watched lane's depth."""
+        cam = self.side_camera()
+        return cam.fx * self.roller_radius / self.side_distance

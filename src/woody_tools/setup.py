@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = "woody_tools"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="woody developers",
+    maintainer_email="woody@example.org",
+    description="The woody command: runs, recording, replay, reports, sweeps and benchmarks.",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "woody = woody_tools.cli:main",
+            "recorder = woody_tools.recorder_node:main",
+        ],
+    },
+)

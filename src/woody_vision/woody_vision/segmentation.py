@@ -1,0 +1,198 @@
+"""Depth-based fillet segmentation for the top camera (paper: background subtraction + watershed).
+
+Pipeline per frame: height map = learned empty-belt depth − depth; mask where the
+height exceeds a few millimetres; morphological opening; connected components;
+and only for components that look like several fillets (low solidity), a
+watershed on the distance transform seeded from its cores, so fillets touching
+in a lane or across lanes come apart. Blobs under ``min_area_px`` are dropped.
+
+Everything per pixel is OpenCV/numpy; the Python loop runs over components
+(a handful per frame) and works on each component's bounding-box ROI.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+DEFAULT_HEIGHT_THRESHOLD_M = 0.005
+"""Pixels rising more than this above the learned background belong to a fillet."""
+DEFAULT_MIN_AREA_PX = 500
+"""Blobs smaller than this are noise or slivers, never a fillet (paper: 500 px)."""
+
+
+@dataclass(frozen=True)
+class Blob:
+    """One segmented fillet in image coordinates (u = column, v = row)."""
+
+    contour: np.ndarray
+    """(K, 2) int32 outer contour, (u, v) per point."""
+    centroid: tuple[float, float]
+    """(u, v) centroid of the blob's pixels."""
+    area_px: int
+    bbox: tuple[int, int, int, int]
+    """(u, v, width, height) of the bounding box."""
+    mean_height_m: float
+
+
+@dataclass(frozen=True)
+class SegmentationParams:
+    """Tuning of :func:`segment_height_map`; defaults follow the paper's top-down setup."""
+
+    height_threshold_m: float = DEFAULT_HEIGHT_THRESHOLD_M
+    min_area_px: int = DEFAULT_MIN_AREA_PX
+    open_kernel_px: int = 5
+    """Elliptic opening kernel that removes specks and thin contact bridges (0 disables)."""
+    split_solidity: float = 0.93
+    """Components less solid (area / hull area) than this are checked for several fillets."""
+    core_ratio: float = 0.5
+    """Watershed markers: the component's pixels farther than this × its max distance from the border."""
+
+    def __post_init__(self) -> None:
+        if not self.height_threshold_m > 0.0:
+            raise ValueError(f"height_threshold_m must be > 0, got {self.height_threshold_m}")
+        if self.min_area_px < 1:
+            raise ValueError(f"min_area_px must be >= 1, got {self.min_area_px}")
+        if self.open_kernel_px < 0:
+            raise ValueError(f"open_kernel_px must be >= 0, got {self.open_kernel_px}")
+        if not 0.0 < self.split_solidity <= 1.0:
+            raise ValueError(f"split_solidity must be in (0, 1], got {self.split_solidity}")
+        if not 0.0 < self.core_ratio < 1.0:
+            raise ValueError(f"core_ratio must be in (0, 1), got {self.core_ratio}")
+
+
+class BackgroundModel:
+    """Empty-belt depth, the per-pixel median of the first ``frames_needed`` frames fed to it.
+
+    Non-finite depths (no return) are ignored in the median; a pixel never seen
+    stays NaN and therefore never rises above the belt in :func:`height_map`.
+    Call :meth:`reset` to relearn, e.g. after the camera or belt moved.
+    """
+
+    def __init__(self, frames_needed: int = 1) -> None:
+        if frames_needed < 1:
+            raise ValueError(f"frames_needed must be >= 1, got {frames_needed}")
+        self.frames_needed = frames_needed
+        self._frames: list[np.ndarray] = []
+        self._depth: np.ndarray | None = None
+
+    @property
+    def ready(self) -> bool:
+        """True once the background has been learned."""
+        return self._depth is not None
+
+    @property
+    def depth(self) -> np.ndarray:
+        """The learned background depth (float32, metres, NaN where never measured)."""
+        if self._depth is None:
+            raise RuntimeError("background not learned yet: feed frames with add() until ready")
+        return self._depth
+
+    def add(self, depth: np.ndarray) -> bool:
+        """Feed one empty-belt depth frame; returns :attr:`ready`. Frames after learning are ignored."""
+        if self._depth is not None:
+            return True
+        frame = np.asarray(depth, dtype=np.float32)
+        if self._frames and frame.shape != self._frames[0].shape:
+            raise ValueError(f"depth shape changed from {self._frames[0].shape} to {frame.shape}")
+        frame = np.where(np.isfinite(frame), frame, np.float32(np.nan))
+        self._frames.append(frame)
+        if len(self._frames) >= self.frames_needed:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pixels stay NaN on purpose
+                self._depth = np.nanmedian(np.stack(self._frames), axis=0).astype(np.float32)
+            self._frames = []
+        return self.ready
+
+    def reset(self) -> None:
+        """Forget the background so the next frames relearn it."""
+        self._frames = []
+        self._depth = None
+
+
+def height_map(depth: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """Height above the learned background in metres (float32); NaN/inf anywhere becomes 0."""
+    height = np.subtract(background, depth, dtype=np.float32)
+    height[~np.isfinite(height)] = 0.0
+    return height
+
+
+def segment_depth(
+    depth: np.ndarray, background: np.ndarray, params: SegmentationParams = SegmentationParams()
+) -> list[Blob]:
+    """Segment the fillets in a depth frame against a background depth."""
+    return segment_height_map(height_map(depth, background), params)
+
+
+def segment_height_map(height: np.ndarray, params: SegmentationParams = SegmentationParams()) -> list[Blob]:
+    """Split a height map into fillet blobs, sorted by centroid row then column."""
+    mask = cv2.compare(height, params.height_threshold_m, cv2.CMP_GT)
+    if params.open_kernel_px > 1:
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (params.open_kernel_px, params.open_kernel_px))
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=cv2.CV_32S)
+    blobs: list[Blob] = []
+    rows, cols = mask.shape
+    for label in range(1, count):
+        x, y, w, h, area = (int(s) for s in stats[label])
+        if area < params.min_area_px:
+            continue
+        # ROI with a 1-pixel empty frame so contours and watershed never touch the ROI border.
+        x0, y0 = max(x - 1, 0), max(y - 1, 0)
+        x1, y1 = min(x + w + 1, cols), min(y + h + 1, rows)
+        component = np.zeros((y1 - y0 + 2, x1 - x0 + 2), np.uint8)
+        component[1:-1, 1:-1][labels[y0:y1, x0:x1] == label] = 255
+        origin = (x0 - 1, y0 - 1)
+        height_roi = np.zeros(component.shape, np.float32)
+        height_roi[1:-1, 1:-1] = height[y0:y1, x0:x1]
+        for part in _split_component(component, params):
+            blob = _make_blob(part, height_roi, origin, params.min_area_px)
+            if blob is not None:
+                blobs.append(blob)
+    blobs.sort(key=lambda b: (b.centroid[1], b.centroid[0]))
+    return blobs
+
+
+def _split_component(component: np.ndarray, params: SegmentationParams) -> list[np.ndarray]:
+    """Masks of the fillets in one connected component (itself if it looks like one fillet)."""
+    contour = _largest_contour(component)
+    hull_area = cv2.contourArea(cv2.convexHull(contour))
+    if hull_area <= 0.0 or cv2.contourArea(contour) / hull_area >= params.split_solidity:
+        return [component]
+    distance = cv2.distanceTransform(component, cv2.DIST_L2, 5)
+    cores = (distance > params.core_ratio * float(distance.max())).astype(np.uint8)
+    n_cores, markers = cv2.connectedComponents(cores, connectivity=8, ltype=cv2.CV_32S)
+    if n_cores <= 2:  # background + one core: a single (non-convex) fillet
+        return [component]
+    # Flood the inverted distance transform from the cores; pixels outside the
+    # component carry their own label so the flood cannot leave the fillet mask.
+    outside = n_cores
+    markers[component == 0] = outside
+    relief = cv2.normalize(-distance, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    cv2.watershed(cv2.merge([relief, relief, relief]), markers)
+    return [np.where(markers == core, np.uint8(255), np.uint8(0)) for core in range(1, n_cores)]
+
+
+def _largest_contour(mask: np.ndarray) -> np.ndarray:
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    return max(contours, key=len)
+
+
+def _make_blob(mask: np.ndarray, height_roi: np.ndarray, origin: tuple[int, int], min_area_px: int) -> Blob | None:
+    area = cv2.countNonZero(mask)
+    if area < min_area_px:
+        return None
+    moments = cv2.moments(mask, binaryImage=True)
+    ox, oy = origin
+    contour = _largest_contour(mask).reshape(-1, 2) + np.array([ox, oy], np.int32)
+    bx, by, bw, bh = cv2.boundingRect(mask)
+    return Blob(
+        contour=contour.astype(np.int32),
+        centroid=(moments["m10"] / moments["m00"] + ox, moments["m01"] / moments["m00"] + oy),
+        area_px=int(area),
+        bbox=(bx + ox, by + oy, bw, bh),
+        mean_height_m=float(height_roi[mask > 0].mean()),
+    )

@@ -1,0 +1,77 @@
+"""Shared fixtures: a private ROS domain per test and an rclpy context on it."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+@pytest.fixture
+def ros_domain():
+    """A ROS domain id that no other test or run on this machine is using."""
+    from woody_tools.graph import lease_domain
+
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
+    with lease_domain(env) as lease:
+        yield lease.domain_id
+
+
+@pytest.fixture
+def ros_node(ros_domain):
+    """An rclpy node in its own context on the test's private domain."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=ros_domain)
+    node = rclpy.create_node("pytest_probe", context=context)
+    yield node
+    node.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture
+def spawn_helper(ros_domain, tmp_path):
+    """Start `python tests/helpers/<script>.py args...` on the test's domain; killed after the test."""
+    procs = []
+
+    def start(script: str, *args: str) -> subprocess.Popen:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), PYTHONUNBUFFERED="1")
+        log = open(tmp_path / f"{script}.log", "w")
+        proc = subprocess.Popen([sys.executable, str(REPO / "tests" / "helpers" / f"{script}.py"), *args],
+                                stdout=log, stderr=subprocess.STDOUT, env=env)
+        procs.append((proc, log))
+        return proc
+
+    yield start
+    for proc, log in procs:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        log.close()
+
+
+def spin_until(node, predicate, timeout: float) -> bool:
+    """Spin ``node`` until ``predicate()`` is true or ``timeout`` seconds pass."""
+    import time
+
+    import rclpy
+
+    executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    deadline = time.monotonic() + timeout
+    try:
+        while time.monotonic() < deadline and not predicate():
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        executor.remove_node(node)
+    return predicate()
