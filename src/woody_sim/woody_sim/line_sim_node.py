@@ -1,0 +1,255 @@
+"""line_sim: the processing line as a ROS 2 node — pybullet physics, two cameras, ground truth, /clock.
+
+The node owns the simulation loop instead of a wall-clock timer: it steps
+physics, renders camera frames on the second core (RenderProcess) whenever a
+camera is due in sim time, and publishes them stamped with that sim time, so
+the graph is correct whether it runs paced (``realtime``) or as fast as it can.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
+from woody_msgs.msg import FilletSpawn
+from woody_msgs.srv import SpawnFillet
+
+from woody_sim.line_geometry import LineGeometry, fpm_to_mps
+from woody_sim.line_world import LineWorld, PhysicsConfig
+from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
+from woody_sim.rendering import RenderProcess, camera_info_fields
+from woody_sim.ros_params import declare, run_node
+from woody_sim.spawn_schedule import SpawnSchedule
+
+TOP_FRAME = "top_camera_optical_frame"
+SIDE_FRAME = "side_camera_optical_frame"
+CLOCK_PERIOD = 0.005
+"""Sim seconds between /clock messages (200 Hz) besides one per camera frame."""
+
+
+class LineSim(Node):
+    """Publishes /clock, the top RGB-D and side cameras and /line/ground_truth; serves /spawn_fillet."""
+
+    def __init__(self) -> None:
+        super().__init__("line_sim")
+        lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
+        speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
+                            "commercial line speeds).", 1.0, 400.0)
+        self.k_values = [float(k) for k in declare(self, "k_values", [0.0, 100.0],
+                                                   "Stiffness values (N*m/rad) drawn per spawned fillet.")]
+        mesh_spec = declare(self, "meshes", "builtin", "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
+        seed = declare(self, "seed", 7, "Seed of the stiffness draw and generated meshes.", 0, 2**31 - 1)
+        self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, 100000)
+        self.spawn_duration = declare(self, "spawn_duration_s", 0.0, "Stop spawning after this much sim time "
+                                      "(0 = no limit).", 0.0, 1e6)
+        spacing = declare(self, "spawn_spacing_m", 0.45, "Belt distance between fillets in a lane (m).", 0.25, 10.0)
+        rate = declare(self, "fillets_per_minute", 0.0, "Spawn rate per lane; overrides spacing when > 0.", 0.0, 200.0)
+        self.mass = declare(self, "mass", 20.0, "Total mass M of a fillet's segment chain (kg); a tuning value, "
+                            "see docs/physics.md.", 0.01, 1000.0)
+        damping = declare(self, "damping", 0.01, "Hinge damping c (N*m*s/rad).", 0.0, 10.0)
+        segments = declare(self, "segments", 40, "Rigid segments N per fillet.", 2, 200)
+        top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
+        side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0, 400.0)
+        side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
+        self.realtime = declare(self, "realtime", False, "Pace the simulation to the wall clock.")
+        self.duration = declare(self, "duration_s", 0.0, "Exit after this much sim time (0 = run until stopped).",
+                                0.0, 1e6)
+        self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
+                                        "subscribers listen to the top depth image.", 0, 100)
+        if not self.k_values or any(k < 0 for k in self.k_values):
+            raise ValueError(f"k_values must be a non-empty list of values >= 0, got {self.k_values}")
+        if side_lane >= lanes:
+            raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
+
+        self.speed = fpm_to_mps(speed_fpm)
+        self.geometry = LineGeometry(lanes=lanes, side_lane=side_lane)
+        self.world = LineWorld(self.geometry, PhysicsConfig(n_segments=segments, damping=damping))
+        meshes, errors = load_mesh_set(mesh_spec)
+        for error in errors:
+            self.get_logger().error(error)
+        if not meshes:
+            raise ValueError(f"mesh set '{mesh_spec}' has no loadable mesh")
+        self.meshes = {m.name: m for m in meshes}
+        interval = 60.0 / rate if rate > 0 else spacing / self.speed
+        self.schedule = SpawnSchedule(meshes=meshes, k_values=self.k_values, lanes=lanes, interval_s=interval,
+                                      seed=seed)
+        self.spawned = 0
+        self.top_period = 1.0 / top_rate
+        self.side_period = 1.0 / side_rate if side_rate > 0 else None
+        self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
+
+        latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        camera_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.clock_pub = self.create_publisher(Clock, "/clock", 10)
+        self.truth_pub = self.create_publisher(FilletSpawn, "/line/ground_truth", latched)
+        self.color_pub = self.create_publisher(Image, "/top_camera/color/image_raw", camera_qos)
+        self.depth_pub = self.create_publisher(Image, "/top_camera/depth/image_raw", camera_qos)
+        self.color_info_pub = self.create_publisher(CameraInfo, "/top_camera/color/camera_info", camera_qos)
+        self.depth_info_pub = self.create_publisher(CameraInfo, "/top_camera/depth/camera_info", camera_qos)
+        self.side_pub = self.create_publisher(Image, "/side_camera/image_raw", camera_qos)
+        self.side_info_pub = self.create_publisher(CameraInfo, "/side_camera/camera_info", camera_qos)
+        self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
+        self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
+        self.create_service(SpawnFillet, "/spawn_fillet", self.on_spawn_request)
+        self.get_logger().info(
+            f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
+            f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
+            f"side {side_rate:g} Hz on lane {self.geometry.watched_lane}")
+
+    # ------------------------------------------------------------------ spawning
+
+    def spawn(self, mesh, k: float, lane: int, mass: float, speed: float) -> int:
+        fillet_id = self.world.spawn(mesh, k=k, lane=lane, mass=mass, speed_mps=speed)
+        model = self.world.model(fillet_id)
+        self.renderer.add_fillet(fillet_id, lane, model.visuals)
+        msg = FilletSpawn(fillet_id=fillet_id, lane=lane, mesh=mesh.name, stiffness=float(k),
+                          damping=float(self.world.config.damping), mass=float(mass), line_speed=float(speed),
+                          segments=model.n_segments, length=float(mesh.length), width=float(mesh.width),
+                          thickness=float(mesh.thickness))
+        msg.header = self._header("world")
+        msg.position.x, msg.position.y = float(self.geometry.spawn_x), float(self.geometry.lane_y(lane))
+        self.truth_pub.publish(msg)
+        self.spawned += 1
+        return fillet_id
+
+    def on_spawn_request(self, request: SpawnFillet.Request, response: SpawnFillet.Response) -> SpawnFillet.Response:
+        try:
+            mesh = self.meshes.get(request.mesh) or load_mesh(request.mesh)
+            fillet_id = self.spawn(mesh, request.stiffness, int(request.lane), request.mass or self.mass,
+                                   request.line_speed or self.speed)
+        except (MeshError, ValueError) as exc:
+            response.success, response.message = False, str(exc)
+            self.get_logger().error(f"spawn request refused: {exc}")
+            return response
+        response.success, response.fillet_id, response.message = True, fillet_id, f"spawned fillet {fillet_id}"
+        return response
+
+    def _spawn_due(self) -> None:
+        limit_reached = (self.max_fillets and self.spawned >= self.max_fillets) or (
+            self.spawn_duration and self.world.time >= self.spawn_duration)
+        if limit_reached:
+            return
+        for mesh, k, lane in self.schedule.due(self.world.time):
+            if self.max_fillets and self.spawned >= self.max_fillets:
+                return
+            self.spawn(mesh, k, lane, self.mass, self.speed)
+
+    # ------------------------------------------------------------------ publishing
+
+    def _header(self, frame_id: str, stamp: float | None = None) -> Header:
+        t = self.world.time if stamp is None else stamp
+        header = Header(frame_id=frame_id)
+        header.stamp.sec = int(t)
+        header.stamp.nanosec = int(round((t - int(t)) * 1e9)) % 1_000_000_000
+        return header
+
+    def _publish_clock(self) -> None:
+        msg = Clock()
+        msg.clock = self._header("").stamp
+        self.clock_pub.publish(msg)
+
+    def _publish_frames(self, frames, stamp: float) -> None:
+        if frames.top_rgb is not None:
+            header = self._header(TOP_FRAME, stamp)
+            self.color_pub.publish(_image(frames.top_rgb, "rgb8", header))
+            self.depth_pub.publish(_image(frames.top_depth, "32FC1", header))
+            self.top_info.header = header
+            self.color_info_pub.publish(self.top_info)
+            self.depth_info_pub.publish(self.top_info)
+        if frames.side_rgb is not None:
+            header = self._header(SIDE_FRAME, stamp)
+            self.side_pub.publish(_image(frames.side_rgb, "rgb8", header))
+            self.side_info.header = header
+            self.side_info_pub.publish(self.side_info)
+
+    # ------------------------------------------------------------------ loop
+
+    def spin(self) -> int:
+        """Run the line until shutdown or ``duration_s``; the executor serves the spawn service in between."""
+        executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        executor.add_node(self)
+        self._wait_for_subscribers(executor)
+        next_top, next_side, next_clock = 0.0, 0.0, 0.0
+        pending_stamp = None
+        wall_start, sim_start = time.monotonic(), self.world.time
+        while rclpy.ok(context=self.context):
+            self._spawn_due()
+            now = self.world.step()
+            for fillet_id in self.world.take_removed():
+                self.renderer.remove_fillet(fillet_id)
+            want_top = now + 1e-9 >= next_top
+            want_side = self.side_period is not None and now + 1e-9 >= next_side
+            if want_top or want_side:
+                if pending_stamp is not None:
+                    self._publish_frames(self.renderer.collect(copy=False), pending_stamp)
+                self._publish_clock()
+                self.renderer.submit(self.world.segment_poses(), want_top=want_top, want_side=want_side)
+                pending_stamp = now
+                next_top += self.top_period if want_top else 0.0
+                next_side += self.side_period if want_side else 0.0
+                next_clock = now + CLOCK_PERIOD
+            elif now >= next_clock:
+                self._publish_clock()
+                next_clock = now + CLOCK_PERIOD
+            executor.spin_once(timeout_sec=0.0)
+            if self.realtime:
+                ahead = (now - sim_start) - (time.monotonic() - wall_start)
+                if ahead > 0.002:
+                    time.sleep(ahead)
+            if self.duration and now >= self.duration:
+                break
+        if pending_stamp is not None and rclpy.ok(context=self.context):
+            self._publish_frames(self.renderer.collect(copy=False), pending_stamp)
+        elapsed = time.monotonic() - wall_start
+        self.get_logger().info(f"stopped at sim time {self.world.time:.2f} s after {elapsed:.1f} s wall "
+                               f"(rtf {(self.world.time - sim_start) / max(elapsed, 1e-9):.2f}x), "
+                               f"{self.spawned} fillets spawned")
+        executor.remove_node(self)
+        return 0
+
+    def _wait_for_subscribers(self, executor) -> None:
+        if not self.wait_subscribers:
+            return
+        self.get_logger().info(f"waiting for {self.wait_subscribers} subscribers on /top_camera/depth/image_raw")
+        while rclpy.ok(context=self.context) and self.depth_pub.get_subscription_count() < self.wait_subscribers:
+            executor.spin_once(timeout_sec=0.05)
+        # Give late joiners (a recorder discovering topics) a moment to subscribe to the rest.
+        deadline = time.monotonic() + 1.0
+        while rclpy.ok(context=self.context) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.renderer.close()
+        self.world.close()
+
+
+def _image(array: np.ndarray, encoding: str, header: Header) -> Image:
+    """A sensor_msgs/Image (REP 118 encodings rgb8 / 32FC1) from a contiguous numpy array."""
+    array = np.ascontiguousarray(array)
+    msg = Image(header=header, height=array.shape[0], width=array.shape[1], encoding=encoding, is_bigendian=0,
+                step=array.strides[0])
+    msg.data = array.tobytes()
+    return msg
+
+
+def _camera_info(camera, frame_id: str) -> CameraInfo:
+    fields = camera_info_fields(camera)
+    info = CameraInfo(width=fields["width"], height=fields["height"], distortion_model=fields["distortion_model"])
+    info.k, info.p, info.r, info.d = fields["K"], fields["P"], fields["R"], fields["D"]
+    info.header.frame_id = frame_id
+    return info
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node("line_sim", LineSim, args))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,282 @@
+"""``woody replay BAG``: republish a bag's serialized messages with their recorded timing.
+
+`add_arguments` and `run` are the subcommand's whole interface (the ``woody`` CLI
+calls them). Behaviour:
+
+- Messages are published as the recorded CDR bytes (no decode), each on a
+  publisher of its recorded type, with the QoS its recorded publishers offered
+  (reliable unless they were all best-effort; transient-local when they all
+  were, e.g. ``/line/ground_truth``), keep-last 100.
+- Pacing: message *i* goes out at ``start + (log_time_i - log_time_0) / rate``
+  on the wall clock (``log_time`` = the recorder's wall-clock reception time).
+  A replayer that falls behind publishes at once and never skips.
+- ``/clock``: the recorded ``/clock`` messages are republished unchanged in
+  their place, so ``use_sim_time`` nodes see the sim times of the recording
+  (running ``rate`` times as fast). A bag without ``/clock`` gets one
+  synthesised from the log times (``--clock-rate`` Hz, plus once before every
+  message). ``--no-clock`` publishes none. ``--topics`` selects data topics
+  only; ``/clock`` follows ``--no-clock``.
+- Before playing it waits up to ``--wait-for-subscribers`` seconds until every
+  publisher has a subscriber, then ``--start-delay`` seconds more.
+- ``--loop`` starts over after the last message (sim time then jumps back).
+
+Exit codes: 0 when the bag (or its readable part) was played or the replay was
+stopped by SIGINT/SIGTERM; 2 with one line on stderr, no traceback, when the
+bag is missing, not an MCAP, holds none of the requested topics or nothing
+playable, or an argument is invalid; 1 for a failure of ROS itself. A
+truncated bag (a killed recorder) plays up to where it is readable, then one
+line on stderr says where it stopped, and the exit code is still 0: the data
+that exists was replayed completely.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from typing import Any
+
+from woody_tools.mcap_io import BagError, bag_summary, message_class, parse_qos_profiles, read_bag
+
+CLOCK = "/clock"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", metavar="BAG", help="the .mcap file (or a directory holding one)")
+    parser.add_argument("--rate", type=float, default=1.0, help="speed factor (2 = twice as fast); default 1")
+    parser.add_argument("--loop", action="store_true", help="start over after the last message")
+    parser.add_argument("--topics", nargs="+", metavar="TOPIC", help="replay only these topics (default: all)")
+    parser.add_argument("--no-clock", action="store_true", help="publish no /clock (neither recorded nor synthesised)")
+    parser.add_argument("--start-delay", type=float, default=0.0, metavar="S",
+                        help="seconds to wait after the publishers are up, before the first message")
+    parser.add_argument("--wait-for-subscribers", type=float, default=2.0, metavar="S",
+                        help="wait up to S seconds for every topic to have a subscriber (0 = don't); default 2")
+    parser.add_argument("--clock-rate", type=float, default=100.0, metavar="HZ",
+                        help="rate of the /clock synthesised for bags without one; default 100")
+    parser.add_argument("--progress", type=float, default=5.0, metavar="S",
+                        help="print progress every S seconds (0 = never); default 5")
+    parser.add_argument("--quiet", action="store_true", help="print only warnings and errors")
+
+
+class _Stop:
+    """Set by SIGINT/SIGTERM (when run in the main thread) or `request`."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+
+    def request(self, *_: Any) -> None:
+        self.event.set()
+
+    def __bool__(self) -> bool:
+        return self.event.is_set()
+
+
+def _fail(message: str) -> int:
+    print(f"replay: {message}", file=sys.stderr, flush=True)
+    return 2
+
+
+def _qos_for(qos_yaml: str):
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    profiles = parse_qos_profiles(qos_yaml)
+    best_effort = bool(profiles) and all(p.get("reliability") == "best_effort" for p in profiles)
+    latched = bool(profiles) and all(p.get("durability") == "transient_local" for p in profiles)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                      reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Play the bag; see the module docstring for options and exit codes."""
+    if not args.rate > 0:
+        return _fail(f"--rate must be > 0 (got {args.rate})")
+    if args.start_delay < 0 or args.wait_for_subscribers < 0 or args.clock_rate <= 0:
+        return _fail("--start-delay and --wait-for-subscribers must be >= 0, --clock-rate > 0")
+    try:
+        info = bag_summary(args.bag)
+    except BagError as exc:
+        return _fail(str(exc))
+    path = info["path"]
+    in_bag: dict[str, dict] = info["topics"]
+    if not in_bag or not info["message_count"]:
+        return _fail(info["error"] or f"{path}: the bag holds no messages")
+
+    requested = None if not args.topics else [t if t.startswith("/") else "/" + t for t in args.topics]
+    if requested is not None:
+        missing = [t for t in requested if t not in in_bag]
+        if len(missing) == len(requested):
+            return _fail(f"{path}: holds none of {' '.join(requested)} (it has {' '.join(sorted(in_bag))})")
+        if missing:
+            print(f"replay: {path}: not in the bag, skipped: {' '.join(missing)}", file=sys.stderr)
+    selected = [t for t in (requested or sorted(in_bag)) if t in in_bag and t != CLOCK]
+    types: dict[str, type] = {}
+    for topic in selected:
+        try:
+            types[topic] = message_class(in_bag[topic]["type"])
+        except LookupError as exc:
+            print(f"replay: skipping {topic}: {exc}", file=sys.stderr)
+    clock_mode = None if args.no_clock else ("recorded" if CLOCK in in_bag else "synthesised")
+    if not types and clock_mode != "recorded":
+        return _fail(f"{path}: nothing playable in the selected topics")
+
+    try:
+        import rclpy
+        from rclpy.signals import SignalHandlerOptions
+    except Exception as exc:  # noqa: BLE001
+        print(f"replay: cannot import rclpy: {exc}", file=sys.stderr)
+        return 1
+
+    stop = _Stop()
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, stop.request)
+    context = rclpy.Context()
+    try:
+        rclpy.init(args=["woody_replay"], context=context, signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node("woody_replay", context=context)
+        try:
+            player = _Player(node, args, path, info, types, clock_mode, stop)
+            return player.play()
+        finally:
+            node.destroy_node()
+    except Exception as exc:  # noqa: BLE001 - one line, not a traceback
+        print(f"replay: failed: {type(exc).__name__}: {exc}".replace("\n", " "), file=sys.stderr)
+        return 1
+    finally:
+        rclpy.try_shutdown(context=context)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+class _Player:
+    def __init__(self, node, args, path: str, info: dict, types: dict[str, type], clock_mode: str | None,
+                 stop: _Stop) -> None:
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+
+        self.node, self.args, self.path, self.info, self.stop = node, args, path, info, stop
+        self.clock_mode = clock_mode
+        self.publishers = {topic: node.create_publisher(cls, topic, _qos_for(info["topics"][topic]["qos"]))
+                           for topic, cls in types.items()}
+        self.clock_publisher = None
+        if clock_mode is not None:
+            self.clock_publisher = node.create_publisher(
+                Clock, CLOCK, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self._clock_msg = Clock()
+        self._last_clock = -1
+        self.topics = list(types) + ([CLOCK] if clock_mode == "recorded" else [])
+        self.count = 0
+        self.bag_seconds = 0.0
+
+    def say(self, text: str) -> None:
+        if not self.args.quiet:
+            print(f"replay: {text}", flush=True)
+
+    # ------------------------------------------------------------------ waiting
+    def _sleep(self, seconds: float) -> None:
+        self.stop.event.wait(max(0.0, seconds))
+
+    def _wait_for_subscribers(self) -> None:
+        limit = self.args.wait_for_subscribers
+        if limit <= 0 or not self.publishers:
+            return
+        deadline = time.monotonic() + limit
+        while not self.stop and time.monotonic() < deadline:
+            if all(p.get_subscription_count() > 0 for p in self.publishers.values()):
+                self._sleep(0.2)  # let the subscribers' side of the match settle too
+                return
+            self._sleep(0.02)
+        lonely = [t for t, p in self.publishers.items() if p.get_subscription_count() == 0]
+        if lonely and not self.stop:
+            self.say(f"no subscriber after {limit:g} s on {' '.join(lonely)}; playing anyway")
+
+    def _publish_clock(self, bag_ns: int) -> None:
+        if bag_ns <= self._last_clock:
+            return
+        self._last_clock = bag_ns
+        self._clock_msg.clock.sec, self._clock_msg.clock.nanosec = divmod(bag_ns, 1_000_000_000)
+        self.clock_publisher.publish(self._clock_msg)
+
+    def _wait_until(self, target: float, t0_wall: float, t0_bag: int, next_bag: int) -> None:
+        synth = self.clock_mode == "synthesised"
+        period = 1.0 / self.args.clock_rate
+        while not self.stop:
+            now = time.monotonic()
+            if synth:
+                self._publish_clock(min(next_bag, t0_bag + int((now - t0_wall) * self.args.rate * 1e9)))
+            remaining = target - now
+            if remaining <= 0:
+                return
+            self._sleep(min(remaining, period if synth else 0.05))
+
+    # ------------------------------------------------------------------ playing
+    def play(self) -> int:
+        readable = "" if self.info["complete"] else " readable (no summary: the recording was cut short)"
+        self.say(f"{self.path}: {len(self.publishers)} topics, {self.info['message_count']} messages{readable}, "
+                 f"{self.info['duration_s']:.1f} s at rate {self.args.rate:g}, clock {self.clock_mode or 'off'}")
+        self._wait_for_subscribers()
+        self._sleep(self.args.start_delay)
+        started = time.monotonic()
+        warned = False
+        passes = 0
+        while not self.stop:
+            played, error = self._play_once()
+            passes += 1
+            if error and not warned:
+                print(f"replay: {error}; stopped there", file=sys.stderr, flush=True)
+                warned = True
+            if not self.args.loop or played == 0:
+                break
+        for publisher in self.publishers.values():
+            from rclpy.duration import Duration
+
+            publisher.wait_for_all_acked(Duration(seconds=1.0))
+        self.say(f"{'stopped' if self.stop else 'done'}: {self.count} messages"
+                 f"{f' in {passes} passes' if passes > 1 else ''}, {time.monotonic() - started:.1f} s")
+        return 0
+
+    def _play_once(self) -> tuple[int, str | None]:
+        t0_bag = t0_wall = None
+        played = 0
+        progress = self.args.progress if not self.args.quiet else 0
+        next_progress = time.monotonic() + progress if progress > 0 else float("inf")
+        total = self.info["duration_s"]
+        try:
+            for topic, _type, data, log_time in read_bag(self.path, topics=self.topics):
+                if t0_bag is None:
+                    t0_bag, t0_wall = log_time, time.monotonic()
+                target = t0_wall + (log_time - t0_bag) / 1e9 / self.args.rate
+                self._wait_until(target, t0_wall, t0_bag, log_time)
+                if self.stop:
+                    break
+                if topic == CLOCK:
+                    self.clock_publisher.publish(data)
+                else:
+                    if self.clock_mode == "synthesised":
+                        self._publish_clock(log_time)
+                    self.publishers[topic].publish(data)
+                played += 1
+                self.count += 1
+                if time.monotonic() >= next_progress:
+                    next_progress += progress
+                    self.say(f"{(log_time - t0_bag) / 1e9:.1f} / {total:.1f} s, {self.count} messages")
+        except BagError as exc:
+            return played, str(exc)
+        finally:
+            self._last_clock = -1  # a new pass may start sim time over
+        return played, None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Stand-alone entry (``python -m woody_tools.replay BAG ...``)."""
+    parser = argparse.ArgumentParser(prog="woody replay", description=__doc__.split("\n")[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,55 @@
+"""`woody report BAG_OR_CSV`: rebuild report.md and its plots from a bag or a verdict table."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from woody_tools.report import Spawn, build_report, join, read_csv, write_csv
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("source", help="an MCAP bag written by `woody run` / `recorder`, or a verdicts.csv")
+    parser.add_argument("--out", default=None, help="folder for report.md and plots (default: beside the source)")
+    parser.add_argument("--woody-k", type=float, default=50.0,
+                        help="fillets with k at or above this are woody in the ground truth (default 50)")
+
+
+def rows_from_bag(path: Path, woody_k: float = 50.0) -> list[dict]:
+    """Ground truth and verdicts recorded in a bag, joined into verdict-table rows."""
+    from woody_tools.line_run import verdict_from_msg
+    from woody_tools.mcap_io import decode, read_bag
+
+    spawns, verdicts = [], []
+    for topic, type_name, data, _log_time in read_bag(path, topics=["/line/ground_truth", "/grading/verdicts"]):
+        msg = decode(type_name, data)
+        if topic == "/line/ground_truth":
+            spawns.append(Spawn(sim_id=msg.fillet_id, lane=msg.lane, mesh=msg.mesh, k=msg.stiffness, mass=msg.mass,
+                                line_speed=msg.line_speed, stamp=msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,
+                                spawn_x=msg.position.x))
+        else:
+            verdicts.append(verdict_from_msg(msg))
+    if not spawns and not verdicts:
+        raise ValueError(f"{path}: no /line/ground_truth or /grading/verdicts messages in this bag")
+    return join(spawns, verdicts, woody_k)
+
+
+def run(args: argparse.Namespace) -> int:
+    source = Path(args.source)
+    if not source.exists():
+        print(f"woody report: {source}: no such file", file=sys.stderr)
+        return 2
+    out = Path(args.out) if args.out else source.parent
+    try:
+        if source.suffix == ".csv":
+            rows = read_csv(source)
+        else:
+            rows = rows_from_bag(source, args.woody_k)
+            write_csv(rows, out / "verdicts.csv")
+    except Exception as exc:  # one clear line for any unreadable input
+        print(f"woody report: {exc}", file=sys.stderr)
+        return 2
+    report = build_report(rows, out, title=f"woody report of {source.name}")
+    print(f"report: {report}")
+    return 0

@@ -1,0 +1,30 @@
+"""When a lane's diverter must open for a fillet: plain arithmetic the reject gate and tests share."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+
+@dataclass(frozen=True)
+class GateTiming:
+    """Line speed and diverter positions; times are sim seconds."""
+
+    line_speed_mps: float
+    gate_distances_m: Sequence[float]
+    open_duration_s: float = 0.3
+
+    def __post_init__(self) -> None:
+        if self.line_speed_mps <= 0:
+            raise ValueError(f"line speed must be > 0 m/s, got {self.line_speed_mps}")
+        if not self.gate_distances_m or any(d <= 0 for d in self.gate_distances_m):
+            raise ValueError(f"gate distances must be > 0 m, got {list(self.gate_distances_m)}")
+        if self.open_duration_s <= 0:
+            raise ValueError(f"open duration must be > 0 s, got {self.open_duration_s}")
+
+    def actuation_time(self, lane: int, edge_crossing_time: float) -> float:
+        """Sim time to open the gate so it is open while the fillet's centre passes."""
+        if not 0 <= lane < len(self.gate_distances_m):
+            raise ValueError(f"lane {lane} has no diverter (lanes 0..{len(self.gate_distances_m) - 1})")
+        travel = self.gate_distances_m[lane] / self.line_speed_mps
+        return edge_crossing_time + travel - self.open_duration_s / 2.0

@@ -1,0 +1,92 @@
+"""reject_gate: an example diverter controller that turns woody verdicts into timed gate commands.
+
+Copy it for your own line. A verdict is stamped with the sim time at which the
+fillet's body centre crossed the roller edge; the fillet then reaches its
+lane's diverter ``gate_distance_m`` further on at line speed, so the gate opens
+at ``stamp + distance / speed - open_duration / 2``. A verdict that arrives
+after that moment is late: it is logged and counted, never acted on.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from builtin_interfaces.msg import Time
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from woody_msgs.msg import FilletVerdict, GateCommand
+
+from woody_sim.line_geometry import FPM_TO_MPS
+from woody_sim.ros_params import declare, run_node
+from woody_vision.gate_timing import GateTiming
+
+
+
+class RejectGate(Node):
+    """Subscribes to /grading/verdicts, publishes /reject_gate/commands."""
+
+    def __init__(self) -> None:
+        super().__init__("reject_gate")
+        speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
+                            "commercial speeds).", 1.0, 400.0)
+        lanes = declare(self, "lanes", 3, "Number of lanes, each with its own diverter.", 1, 6)
+        distances = list(declare(self, "gate_distance_m", [0.6], "Distance from the roller edge to each lane's "
+                                 "diverter (m): one value for all lanes or one per lane."))
+        open_duration = declare(self, "open_duration_s", 0.3, "How long a diverter stays open (s).", 0.01, 5.0)
+        declare(self, "divert_unscored", False, "Also divert fillets that could not be scored (fail safe).")
+        if len(distances) not in (1, lanes):
+            raise ValueError(f"gate_distance_m needs 1 or {lanes} values, got {len(distances)}")
+        self.timing = GateTiming(line_speed_mps=speed_fpm * FPM_TO_MPS,
+                                 gate_distances_m=distances if len(distances) == lanes else distances * lanes,
+                                 open_duration_s=open_duration)
+        self.divert_unscored = bool(self.get_parameter("divert_unscored").value)
+        self.diverted = 0
+        self.late = 0
+        self.passed = 0
+        reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        self.publisher = self.create_publisher(GateCommand, "/reject_gate/commands", reliable)
+        self.create_subscription(FilletVerdict, "/grading/verdicts", self.on_verdict, reliable)
+
+    def close(self) -> None:
+        print(f"[reject_gate] diverted {self.diverted}, late {self.late}, passed {self.passed}", flush=True)
+
+    def on_verdict(self, verdict: FilletVerdict) -> None:
+        woody = verdict.classification == FilletVerdict.CLASS_WOODY
+        unscored = verdict.classification == FilletVerdict.CLASS_UNSCORED
+        if not (woody or (unscored and self.divert_unscored)):
+            self.passed += 1
+            return
+        now = self.get_clock().now().nanoseconds * 1e-9
+        crossing = verdict.header.stamp.sec + verdict.header.stamp.nanosec * 1e-9
+        try:
+            actuation = self.timing.actuation_time(verdict.lane, crossing)
+        except ValueError as exc:
+            self.get_logger().error(f"verdict for fillet {verdict.fillet_id}: {exc}; not acted on")
+            return
+        if actuation < now:
+            self.late += 1
+            self.get_logger().warning(
+                f"late verdict for fillet {verdict.fillet_id} in lane {verdict.lane}: gate time {actuation:.3f} s "
+                f"already passed at {now:.3f} s ({self.late} late so far); not diverted")
+            return
+        command = GateCommand(lane=verdict.lane, fillet_id=verdict.fillet_id, open_duration=self.timing.open_duration_s,
+                              phi=verdict.phi, actuation_time=_stamp(actuation))
+        command.header.stamp = self.get_clock().now().to_msg()
+        command.header.frame_id = verdict.header.frame_id
+        self.publisher.publish(command)
+        self.diverted += 1
+        self.get_logger().info(f"divert fillet {verdict.fillet_id} lane {verdict.lane} at {actuation:.3f} s "
+                               f"(phi {verdict.phi:.2f}); {self.diverted} diverted")
+
+
+def _stamp(seconds: float) -> Time:
+    sec = int(seconds)
+    return Time(sec=sec, nanosec=int(round((seconds - sec) * 1e9)))
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node("reject_gate", RejectGate, args))
+
+
+if __name__ == "__main__":
+    main()
