@@ -1,0 +1,94 @@
+"""Verdict latency across processes: closing frame published here → verdict received here.
+
+Starts the real segmenter and grader entry points on a private domain, plays a
+synthetic multi-lane top-down stream (woody_vision.synthetic) at 30 Hz with
+/clock and camera_info, and times every verdict against the wall time its
+closing frame (same header stamp) was published.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from woody_tools.graph import NodeProcess, lease_domain, wait_for
+
+FRAME_RATE_HZ = 30.0
+
+
+def measure_verdict_latency(seconds: float = 10.0, lanes: int = 3, seed: int = 3) -> dict:
+    """p50/p95 verdict latency (ms) and the verdict count over ``seconds`` of synthetic line."""
+    import rclpy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import CameraInfo, Image
+    from woody_msgs.msg import FilletVerdict
+
+    from woody_vision.synthetic import TopScene, lane_streams
+
+    scene = TopScene(lane_streams(lanes, per_lane=max(2, int(seconds / 0.9)), pitch_m=0.45, seed=seed,
+                                  touching_probability=0.0))
+    published: dict[int, float] = {}
+    latencies: list[float] = []
+    with lease_domain() as lease, tempfile.TemporaryDirectory() as logs:
+        params = {"use_sim_time": True, "lanes": lanes}
+        nodes = [NodeProcess("segmenter", params, domain_id=lease.domain_id, log_dir=Path(logs)),
+                 NodeProcess("grader", dict(params, use_side_view=False), domain_id=lease.domain_id, log_dir=Path(logs))]
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=lease.domain_id)
+        node = rclpy.create_node("bench_latency", context=context)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        clock_pub = node.create_publisher(Clock, "/clock", 10)
+        depth_pub = node.create_publisher(Image, "/top_camera/depth/image_raw", qos)
+        info_pub = node.create_publisher(CameraInfo, "/top_camera/depth/camera_info", qos)
+
+        def on_verdict(msg: FilletVerdict) -> None:
+            key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            if key in published:
+                latencies.append((time.monotonic() - published[key]) * 1e3)
+
+        node.create_subscription(FilletVerdict, "/grading/verdicts", on_verdict, QoSProfile(depth=100))
+        try:
+            ready = wait_for(lambda: (executor.spin_once(timeout_sec=0.05) or True)
+                             and depth_pub.get_subscription_count() >= 1 and info_pub.get_subscription_count() >= 2,
+                             timeout=30.0)
+            if not ready:
+                raise RuntimeError("segmenter/grader did not subscribe within 30 s")
+            info = CameraInfo(width=scene.width, height=scene.height, distortion_model="plumb_bob")
+            info.k = list(scene.k)
+            start = time.monotonic()
+            for i in range(int(seconds * FRAME_RATE_HZ)):
+                t = i / FRAME_RATE_HZ
+                _, depth = scene.render(t)
+                key = int(round(t * 1e9))
+                clock = Clock()
+                clock.clock.sec, clock.clock.nanosec = divmod(key, 1_000_000_000)
+                clock_pub.publish(clock)
+                info.header.stamp = clock.clock
+                info_pub.publish(info)
+                image = Image(height=scene.height, width=scene.width, encoding="32FC1", step=scene.width * 4)
+                image.header.stamp = clock.clock
+                image.data = np.ascontiguousarray(depth, np.float32).tobytes()
+                published[key] = time.monotonic()
+                depth_pub.publish(image)
+                deadline = start + (i + 1) / FRAME_RATE_HZ
+                while time.monotonic() < deadline:
+                    executor.spin_once(timeout_sec=max(0.0, deadline - time.monotonic()))
+            end = time.monotonic() + 1.0
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+        finally:
+            for process in nodes:
+                process.stop()
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+    if not latencies:
+        raise RuntimeError("no verdict was received; see the segmenter/grader logs")
+    values = np.array(latencies)
+    return {"count": int(values.size), "p50_ms": float(np.percentile(values, 50)),
+            "p95_ms": float(np.percentile(values, 95))}

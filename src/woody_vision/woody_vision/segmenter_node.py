@@ -1,0 +1,141 @@
+"""segmenter: top-down depth frames in, tracked fillet contours out (/vision/tracks).
+
+Thin adapter over woody_vision.segmentation and woody_vision.tracking. The
+empty-belt background is learned from the first frames (publish on
+~/reset_background to relearn it); every bad frame is skipped with one log
+line so a camera hiccup never takes the node down or corrupts its tracks.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import cv2
+import numpy as np
+from geometry_msgs.msg import Point32, Polygon
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Empty
+from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
+
+from woody_sim.ros_params import declare, run_node
+from woody_vision.camera_model import LaneLayout
+from woody_vision.frame_checks import FrameChecker, FrameError, image_to_array
+from woody_vision.segmentation import BackgroundModel, SegmentationParams, segment_depth
+from woody_vision.tracking import CentroidTracker
+
+
+class Segmenter(Node):
+    """Depth background subtraction + watershed + centroid tracking for every lane at once."""
+
+    def __init__(self) -> None:
+        super().__init__("segmenter")
+        self.params = SegmentationParams(
+            height_threshold_m=declare(self, "height_threshold_m", 0.005, "Height above the belt background that "
+                                       "counts as fillet (m).", 0.0005, 0.1),
+            min_area_px=declare(self, "min_area_px", 500, "Blobs smaller than this are dropped (px).", 1, 100000),
+        )
+        self.lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
+        self.lane_pitch = declare(self, "lane_pitch_m", 0.16, "Distance between lane centres (m).", 0.01, 2.0)
+        self.camera_height = declare(self, "camera_height_m", 0.75, "Top camera height above the belt (m), part of "
+                                     "its extrinsic calibration.", 0.05, 10.0)
+        max_unseen = declare(self, "max_unseen_frames", 15, "A track ends after this many frames unseen.", 1, 1000)
+        max_distance = declare(self, "max_distance_px", 40.0, "Largest centroid jump matched frame to frame (px).",
+                               1.0, 1000.0)
+        frames = declare(self, "background_frames", 5, "Empty-belt frames the background is learned from.", 1, 1000)
+        self.publish_debug = declare(self, "publish_debug_image", False, "Publish /vision/debug_image (contours, "
+                                     "ids, scores) for a person watching.")
+        self.background = BackgroundModel(frames)
+        self.tracker_options = dict(max_distance_px=max_distance, max_unseen=max_unseen)
+        self.tracker: CentroidTracker | None = None
+        self.checker = FrameChecker(self.get_logger())
+        self.latest_color: Image | None = None
+        self.scores: dict[int, str] = {}
+
+        sensor = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE)
+        self.tracks_pub = self.create_publisher(FilletTrackArray, "/vision/tracks", QoSProfile(depth=50))
+        self.debug_pub = self.create_publisher(Image, "/vision/debug_image", 5) if self.publish_debug else None
+        self.create_subscription(CameraInfo, "/top_camera/depth/camera_info", self.on_camera_info, sensor)
+        self.create_subscription(Image, "/top_camera/depth/image_raw", self.on_depth, sensor)
+        self.create_subscription(Empty, "~/reset_background", self.on_reset, 1)
+        if self.publish_debug:
+            self.create_subscription(Image, "/top_camera/color/image_raw", self.on_color, sensor)
+            self.create_subscription(FilletVerdict, "/grading/verdicts", self.on_verdict, 50)
+
+    def on_camera_info(self, info: CameraInfo) -> None:
+        if self.tracker is None and info.k[0] > 0:
+            layout = LaneLayout(tuple(info.k), self.camera_height, self.lanes, self.lane_pitch)
+            self.tracker = CentroidTracker(lane_layout=layout, **self.tracker_options)
+            self.get_logger().info(f"calibration received: fx={info.k[0]:.1f}, {info.width}x{info.height}")
+
+    def on_reset(self, _msg: Empty) -> None:
+        self.background.reset()
+        self.checker.reset()
+        self.get_logger().info("background reset: relearning from the next frames")
+
+    def on_color(self, msg: Image) -> None:
+        self.latest_color = msg
+
+    def on_verdict(self, msg: FilletVerdict) -> None:
+        self.scores[msg.fillet_id] = f"{msg.phi:.1f}"
+        while len(self.scores) > 200:  # only fillets still in view need their score
+            self.scores.pop(next(iter(self.scores)))
+
+    def on_depth(self, msg: Image) -> None:
+        try:
+            depth = image_to_array(msg, "32FC1")
+            self.checker.check(msg, depth.shape)
+        except FrameError as exc:
+            self.checker.reject(str(exc))
+            return
+        if self.checker.restarted:
+            self.get_logger().warning("camera restarted (stamp went back or the size changed): relearning background")
+            self.background.reset()
+            if self.tracker is not None:
+                self.tracker.reset()
+        if not self.background.ready:
+            self.background.add(depth)
+            return
+        if self.tracker is None:
+            self.checker.reject("no camera_info received yet on /top_camera/depth/camera_info; frame skipped")
+            return
+        blobs = segment_depth(depth, self.background.depth, self.params)
+        update = self.tracker.update(blobs)
+        out = FilletTrackArray(header=msg.header, image_width=msg.width, image_height=msg.height,
+                               ended_ids=[t.track_id for t in update.ended])
+        for track in update.active:
+            blob = track.blob
+            u, v, w, h = blob.bbox
+            out.tracks.append(FilletTrack(
+                id=track.track_id, lane=max(track.lane, 0), centroid_u=float(blob.centroid[0]),
+                centroid_v=float(blob.centroid[1]), bbox_u=u, bbox_v=v, bbox_width=w, bbox_height=h,
+                area=float(blob.area_px), mean_height=float(blob.mean_height_m), age=track.age, unseen=track.unseen,
+                contour=Polygon(points=[Point32(x=float(x), y=float(y)) for x, y in blob.contour])))
+        self.tracks_pub.publish(out)
+        if self.debug_pub is not None:
+            self._publish_debug(msg, update.active)
+
+    def _publish_debug(self, depth_msg: Image, tracks) -> None:
+        if self.latest_color is None or self.latest_color.header.stamp != depth_msg.header.stamp:
+            canvas = np.zeros((depth_msg.height, depth_msg.width, 3), np.uint8)
+        else:
+            canvas = image_to_array(self.latest_color, "rgb8").copy()
+        for track in tracks:
+            colour = (0, 255, 0) if track.unseen == 0 else (255, 160, 0)
+            cv2.polylines(canvas, [track.blob.contour.reshape(-1, 1, 2)], True, colour, 1)
+            label = f"{track.track_id} L{track.lane}" + (f" {self.scores[track.track_id]}" if track.track_id in self.scores else "")
+            u, v = (int(c) for c in track.blob.centroid)
+            cv2.putText(canvas, label, (u - 20, v), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1)
+        out = Image(header=depth_msg.header, height=canvas.shape[0], width=canvas.shape[1], encoding="rgb8",
+                    step=canvas.shape[1] * 3)
+        out.data = canvas.tobytes()
+        self.debug_pub.publish(out)
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node("segmenter", Segmenter, args))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,103 @@
+"""The real entry points as separate processes: line_sim's topics, and the whole grading graph."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from conftest import spin_until
+from woody_tools.graph import NodeProcess
+
+
+def _seconds(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_path):
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import CameraInfo, Image
+    from woody_msgs.msg import FilletSpawn
+
+    duration = 3.0
+    topics = {
+        "/top_camera/color/image_raw": Image, "/top_camera/depth/image_raw": Image,
+        "/top_camera/color/camera_info": CameraInfo, "/top_camera/depth/camera_info": CameraInfo,
+        "/side_camera/image_raw": Image, "/side_camera/camera_info": CameraInfo,
+    }
+    received: dict[str, list] = {name: [] for name in [*topics, "/clock", "/line/ground_truth"]}
+    reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    for name, msg_type in topics.items():
+        ros_node.create_subscription(msg_type, name, lambda m, n=name: received[n].append(m), reliable)
+    ros_node.create_subscription(Clock, "/clock", lambda m: received["/clock"].append(_seconds(m.clock)), 100)
+    ros_node.create_subscription(FilletSpawn, "/line/ground_truth", received["/line/ground_truth"].append,
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    sim = NodeProcess("line_sim", {"duration_s": duration, "wait_for_subscribers": 1, "side_rate_hz": 60.0},
+                      domain_id=ros_domain, log_dir=tmp_path)
+    try:
+        spin_until(ros_node, lambda: not sim.alive(), timeout=120.0)
+        spin_until(ros_node, lambda: False, timeout=1.0)
+    finally:
+        assert sim.stop() == 0, sim.log_tail()
+
+    def stamps(name):
+        return np.array([_seconds(m.header.stamp) for m in received[name]])
+
+    top, side = stamps("/top_camera/depth/image_raw"), stamps("/side_camera/image_raw")
+    assert abs(len(top) - 30 * duration) <= 3, len(top)
+    assert abs(len(side) - 60 * duration) <= 3, len(side)
+    assert np.allclose(np.diff(top), 1 / 30, atol=0.003) and np.allclose(np.diff(side), 1 / 60, atol=0.003)
+    assert len(stamps("/top_camera/color/image_raw")) == len(top) == len(stamps("/top_camera/depth/camera_info"))
+    clock = np.array(received["/clock"])
+    assert len(clock) > 100 and np.all(np.diff(clock) > 0) and clock[-1] == pytest.approx(duration, abs=0.01)
+    depth, color, info = (received[n][0] for n in ("/top_camera/depth/image_raw", "/top_camera/color/image_raw",
+                                                   "/top_camera/depth/camera_info"))
+    assert (depth.width, depth.height, depth.encoding) == (672, 376, "32FC1")
+    assert (color.width, color.height, color.encoding) == (672, 376, "rgb8")
+    assert received["/side_camera/image_raw"][0].width == 960 and received["/side_camera/image_raw"][0].height == 696
+    assert info.k[0] > 0 and info.header.frame_id == depth.header.frame_id == "top_camera_optical_frame"
+    belt = np.frombuffer(bytes(depth.data), np.float32).reshape(376, 672)[188, 336]
+    assert belt == pytest.approx(0.75, abs=0.002)  # the belt plane, metres from the camera
+    spawns = received["/line/ground_truth"]
+    assert len(spawns) >= 3 and len({s.fillet_id for s in spawns}) == len(spawns)
+    assert {s.lane for s in spawns} == {0, 1, 2} and all(s.stiffness in (0.0, 100.0) for s in spawns)
+
+
+def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_path):
+    from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
+
+    verdicts: list = []
+    commands: list = []
+    spawns: list = []
+    reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    ros_node.create_subscription(FilletVerdict, "/grading/verdicts", verdicts.append, reliable)
+    ros_node.create_subscription(GateCommand, "/reject_gate/commands", commands.append, reliable)
+    ros_node.create_subscription(FilletSpawn, "/line/ground_truth", spawns.append,
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    vision = {"use_sim_time": True, "lanes": 3}
+    nodes = [NodeProcess("segmenter", vision, domain_id=ros_domain, log_dir=tmp_path),
+             NodeProcess("grader", vision, domain_id=ros_domain, log_dir=tmp_path),
+             NodeProcess("reject_gate", {"use_sim_time": True}, domain_id=ros_domain, log_dir=tmp_path),
+             NodeProcess("line_sim", {"fillets": 6, "duration_s": 5.5, "wait_for_subscribers": 1},
+                         domain_id=ros_domain, log_dir=tmp_path)]
+    try:
+        spin_until(ros_node, lambda: not nodes[-1].alive() or not all(n.alive() for n in nodes[:3]), timeout=240.0)
+        spin_until(ros_node, lambda: False, timeout=2.0)
+        assert all(n.alive() for n in nodes[:3]), "\n".join(n.log_tail() for n in nodes)
+    finally:
+        for node in nodes:
+            node.stop()
+    assert len(spawns) == 6
+    logs = "\n".join(f"--- {n.name}\n{n.log_tail(40)}" for n in nodes)
+    ids = [v.fillet_id for v in verdicts]
+    assert len(ids) == len(set(ids)), f"a fillet got two verdicts: {ids}"
+    assert len(verdicts) == 6, f"{len(verdicts)} verdicts for 6 fillets\n{logs}"
+    assert sorted(v.lane for v in verdicts) == sorted(s.lane for s in spawns)
+    scored = [v for v in verdicts if v.classification != FilletVerdict.CLASS_UNSCORED]
+    assert len(scored) >= 5, [v.unscored_reason for v in verdicts]
+    assert all(np.isfinite(v.phi) and v.phi >= 0 for v in scored)
+    assert any(v.side_measured and np.isfinite(v.nmdm) for v in verdicts if v.lane == 1), "no side-view metrics"
+    woody = [v for v in verdicts if v.classification == FilletVerdict.CLASS_WOODY]
+    assert len(commands) == len(woody) and {c.fillet_id for c in commands} == {v.fillet_id for v in woody}
