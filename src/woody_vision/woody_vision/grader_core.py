@@ -1,0 +1,151 @@
+"""One verdict per fillet: the top-down shape score plus, for the watched lane, the side-view metrics.
+
+Plain module (no rclpy): the grader node feeds it tracks and side frames; the
+experiment runner and the benchmark feed it the same way without ROS.
+
+The top-down window of a fillet closes when its virtual centroid crosses the
+roller edge; the side camera finishes measuring that fillet a little later
+(it is still falling). Verdicts of the watched lane are therefore held until
+the side passage that overlaps them ends, or for at most ``side_wait_s`` of
+sim time, so each fillet still gets exactly one verdict.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from woody_vision.grading import GradingRules
+from woody_vision.shape_score import STATUS_SCORED, ShapeEvaluator, ShapeResult
+from woody_vision.side_view import SideMeasurement
+
+DEFAULT_SIDE_WAIT_S = 0.8
+"""Longest a watched-lane verdict waits for its side-view measurement (sim s)."""
+
+SIDE_MATCH_SLACK_S = 0.3
+"""A side passage matches a top-down window closing up to this long before or after the passage."""
+
+
+@dataclass(frozen=True)
+class TrackObservation:
+    """One track of one top-down frame, as the segmenter publishes it."""
+
+    track_id: int
+    lane: int
+    contour: np.ndarray
+    unseen: int = 0
+
+
+@dataclass(frozen=True)
+class GradedFillet:
+    """Everything a verdict message carries."""
+
+    fillet_id: int
+    lane: int
+    shape: ShapeResult
+    label: str
+    """'normal', 'woody' or 'unscored'."""
+    grade: str
+    """'normal' / 'moderate' / 'severe' when grading, else ''."""
+    side: SideMeasurement | None = None
+
+    @property
+    def scored(self) -> bool:
+        return self.shape.status == STATUS_SCORED
+
+
+@dataclass
+class _Pending:
+    graded: GradedFillet
+    deadline: float
+
+
+@dataclass
+class FilletGrader:
+    """Per-track shape evaluation, classification and side-view pairing."""
+
+    edge_row: float
+    rules: GradingRules = field(default_factory=GradingRules)
+    watched_lane: int | None = None
+    side_wait_s: float = DEFAULT_SIDE_WAIT_S
+    evaluator_options: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.side_wait_s < 0:
+            raise ValueError(f"side_wait_s must be >= 0, got {self.side_wait_s}")
+        ShapeEvaluator(self.edge_row, **self.evaluator_options)  # validate options now
+        self._evaluators: dict[int, ShapeEvaluator] = {}
+        self._lanes: dict[int, int] = {}
+        self._pending: list[_Pending] = []
+        self._side: list[SideMeasurement] = []
+        self.now = -math.inf
+
+    def on_tracks(self, stamp: float, tracks: Sequence[TrackObservation], ended_ids: Iterable[int] = ()) -> list[GradedFillet]:
+        """Feed one top-down frame; returns the verdicts decided now (held watched-lane ones come later)."""
+        self.now = max(self.now, stamp)
+        decided: list[GradedFillet] = []
+        for track in tracks:
+            self._lanes[track.track_id] = track.lane
+            if track.unseen:
+                continue
+            evaluator = self._evaluators.get(track.track_id)
+            if evaluator is None:
+                evaluator = self._evaluators[track.track_id] = ShapeEvaluator(self.edge_row, **self.evaluator_options)
+            result = evaluator.update(track.contour, stamp)
+            if result is not None:  # a finished evaluator stays until its track ends: one verdict per track
+                decided += self._decide(track.track_id, result)
+        for track_id in ended_ids:
+            evaluator = self._evaluators.pop(track_id, None)
+            result = evaluator.finish() if evaluator is not None else None
+            if result is not None:
+                decided += self._decide(track_id, result)
+            self._lanes.pop(track_id, None)
+        return decided + self.release(self.now)
+
+    def on_side(self, measurement: SideMeasurement) -> list[GradedFillet]:
+        """Attach a finished side-view passage to the held verdict it overlaps; returns verdicts released."""
+        self._side.append(measurement)
+        self._side = [m for m in self._side if m.last_stamp >= self.now - 5.0]
+        return self.release(self.now)
+
+    def release(self, now: float) -> list[GradedFillet]:
+        """Held verdicts that found their side measurement or waited long enough."""
+        self.now = max(self.now, now)
+        out: list[GradedFillet] = []
+        keep: list[_Pending] = []
+        for pending in self._pending:
+            side = self._match_side(pending.graded)
+            if side is not None:
+                out.append(_with_side(pending.graded, side))
+            elif self.now >= pending.deadline:
+                out.append(pending.graded)
+            else:
+                keep.append(pending)
+        self._pending = keep
+        return out
+
+    def _decide(self, track_id: int, result: ShapeResult) -> list[GradedFillet]:
+        lane = self._lanes.get(track_id, -1)
+        if result.status == STATUS_SCORED and math.isfinite(result.phi):
+            classification = self.rules.classify(result.phi)
+            graded = GradedFillet(track_id, lane, result, classification.label, classification.grade or "")
+        else:
+            graded = GradedFillet(track_id, lane, result, "unscored", "")
+        if self.watched_lane is None or lane != self.watched_lane or not graded.scored:
+            return [graded]
+        self._pending.append(_Pending(graded, deadline=(result.stamp or self.now) + self.side_wait_s))
+        return []
+
+    def _match_side(self, graded: GradedFillet) -> SideMeasurement | None:
+        closing = graded.shape.stamp
+        for i, m in enumerate(self._side):
+            if m.first_stamp - SIDE_MATCH_SLACK_S <= closing <= m.last_stamp + SIDE_MATCH_SLACK_S:
+                return self._side.pop(i)
+        return None
+
+
+def _with_side(graded: GradedFillet, side: SideMeasurement) -> GradedFillet:
+    return GradedFillet(graded.fillet_id, graded.lane, graded.shape, graded.label, graded.grade, side)

@@ -1,0 +1,158 @@
+"""grader: tracks and side-view frames in, one verdict per fillet out (/grading/verdicts).
+
+Thin adapter over woody_vision.grader_core. The roller edge row comes from
+the top camera's calibration (K from camera_info, plus the camera height and
+the edge offset from its optical axis as parameters), never from a pixel
+constant; the side view's roller axle and radius are parameters of that
+camera's calibration.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image
+from woody_msgs.msg import FilletTrackArray, FilletVerdict
+
+from woody_sim.ros_params import declare, run_node
+from woody_vision.camera_model import edge_row
+from woody_vision.frame_checks import FrameChecker, FrameError, image_to_array
+from woody_vision.grader_core import FilletGrader, GradedFillet, TrackObservation
+from woody_vision.grading import DEFAULT_PHI_THRESHOLD, GradingRules
+from woody_vision.side_view import SidePassageTracker
+
+LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY, "unscored": FilletVerdict.CLASS_UNSCORED}
+
+
+class Grader(Node):
+    """Scores Φ per track, pairs the watched lane with side-view metrics, publishes verdicts."""
+
+    def __init__(self) -> None:
+        super().__init__("grader")
+        threshold = declare(self, "threshold", DEFAULT_PHI_THRESHOLD, "Φ below this is woody (stiff fillets deform "
+                            "less); the default is the calibrated one.", 0.001, 1000.0)
+        moderate = declare(self, "moderate_threshold", 0.0, "Φ below this grades at least moderate (0 = threshold).",
+                           0.0, 1000.0)
+        severe = declare(self, "severe_threshold", 0.0, "Φ below this grades severe (0 = no grades).", 0.0, 1000.0)
+        self.rules = GradingRules(threshold, moderate or None, severe or None)
+        self.camera_height = declare(self, "camera_height_m", 0.75, "Top camera height above the belt (m).", 0.05, 10.0)
+        self.edge_offset = declare(self, "roller_edge_offset_m", 0.20, "Distance from the top camera's optical axis "
+                                   "to the roller edge along the flow (m).", -5.0, 5.0)
+        self.evaluator_options = dict(
+            w1=declare(self, "w1", 100.0, "Weight of the Hu-moment term of Φ.", 0.0, 1e6),
+            w2=declare(self, "w2", 100.0, "Weight of the solidity term of Φ.", 0.0, 1e6),
+            tip_ratio=declare(self, "tip_ratio", 0.30, "Tip cut where the width falls below this fraction of the "
+                              "maximum body width.", 0.01, 0.99),
+        )
+        lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
+        side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
+        self.side_enabled = declare(self, "use_side_view", True, "Measure NMDM/MDM/BE on the watched lane.")
+        self.side_wait = declare(self, "side_wait_s", 0.8, "Longest a watched-lane verdict waits for its side-view "
+                                 "measurement (s).", 0.0, 10.0)
+        self.side_options = dict(
+            axle_px=(declare(self, "roller_axle_u", 480.0, "Roller axle column in the side image (px).", -1e4, 1e4),
+                     declare(self, "roller_axle_v", 300.0, "Roller axle row in the side image (px).", -1e4, 1e4)),
+            roller_radius_px=declare(self, "roller_radius_px", 48.0, "Roller radius in the side image (px).", 1.0, 1e4),
+        )
+        if side_lane >= lanes:
+            raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
+        self.watched_lane = (lanes - 1) // 2 if side_lane < 0 else side_lane
+        self.core: FilletGrader | None = None
+        self.side = SidePassageTracker(**self.side_options) if self.side_enabled else None
+        self.side_checker = FrameChecker(self.get_logger())
+        self.published = 0
+
+        reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        sensor = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.verdict_pub = self.create_publisher(FilletVerdict, "/grading/verdicts", reliable)
+        self.create_subscription(CameraInfo, "/top_camera/depth/camera_info", self.on_camera_info, sensor)
+        self.create_subscription(FilletTrackArray, "/vision/tracks", self.on_tracks, QoSProfile(depth=50))
+        if self.side is not None:
+            self.create_subscription(Image, "/side_camera/image_raw", self.on_side_image, sensor)
+        self.create_timer(0.1, self.on_timer)
+        self.frame_id = ""
+
+    def on_camera_info(self, info: CameraInfo) -> None:
+        if self.core is None and info.k[0] > 0:
+            row = edge_row(tuple(info.k), self.camera_height, self.edge_offset)
+            self.core = FilletGrader(row, self.rules, self.watched_lane if self.side else None, self.side_wait,
+                                     self.evaluator_options)
+            self.get_logger().info(f"roller edge at image row {row:.1f} (from camera_info K, camera height "
+                                   f"{self.camera_height} m, edge offset {self.edge_offset} m)")
+
+    def on_tracks(self, msg: FilletTrackArray) -> None:
+        if self.core is None:
+            self.side_checker.reject("no camera_info on /top_camera/depth/camera_info yet; tracks skipped")
+            return
+        self.frame_id = msg.header.frame_id
+        tracks = [TrackObservation(t.id, t.lane, np.array([[p.x, p.y] for p in t.contour.points], np.int32), t.unseen)
+                  for t in msg.tracks if len(t.contour.points) >= 3]
+        self._publish(self.core.on_tracks(_seconds(msg.header.stamp), tracks, msg.ended_ids))
+
+    def on_side_image(self, msg: Image) -> None:
+        try:
+            rgb = image_to_array(msg, "rgb8")
+            self.side_checker.check(msg, rgb.shape)
+        except FrameError as exc:
+            self.side_checker.reject(f"side camera: {exc}")
+            return
+        if self.side_checker.restarted:
+            self.side.reset()
+        for measurement in self.side.update(rgb, _seconds(msg.header.stamp)):
+            if self.core is not None:
+                self._publish(self.core.on_side(measurement))
+
+    def on_timer(self) -> None:
+        if self.core is not None:
+            now = self.get_clock().now().nanoseconds * 1e-9
+            self._publish(self.core.release(now))
+
+    def _publish(self, graded: list[GradedFillet]) -> None:
+        for fillet in graded:
+            self.verdict_pub.publish(self.to_msg(fillet))
+            self.published += 1
+
+    def to_msg(self, fillet: GradedFillet) -> FilletVerdict:
+        shape, side, nan = fillet.shape, fillet.side, math.nan
+        msg = FilletVerdict(
+            fillet_id=fillet.fillet_id, lane=max(fillet.lane, 0), classification=LABELS[fillet.label],
+            grade=fillet.grade, unscored_reason=shape.reason, phi=_finite_or_nan(shape.phi),
+            hu_term=_finite_or_nan(shape.hu_term), solidity_term=_finite_or_nan(shape.solidity_term),
+            threshold=self.rules.threshold, moderate_threshold=self.rules.grade_moderate_threshold
+            if self.rules.severe_threshold else nan, severe_threshold=self.rules.severe_threshold or nan,
+            frames_in_window=shape.frames, side_measured=side is not None,
+            nmdm=side.nmdm if side else nan, mdm=side.mdm_min_px if side else nan, be=side.be if side else nan)
+        msg.header.stamp = _time(shape.stamp if shape.stamp is not None else self.core.now)
+        msg.header.frame_id = self.frame_id
+        if shape.reference_stamp is not None:
+            msg.reference_stamp = _time(shape.reference_stamp)
+        return msg
+
+    def close(self) -> None:
+        print(f"[grader] published {self.published} verdicts", flush=True)
+
+
+def _seconds(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def _time(seconds: float) -> Time:
+    sec = int(math.floor(seconds))
+    return Time(sec=sec, nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
+
+
+def _finite_or_nan(value: float) -> float:
+    return float(value) if value is not None and math.isfinite(value) else math.nan
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node("grader", Grader, args))
+
+
+if __name__ == "__main__":
+    main()

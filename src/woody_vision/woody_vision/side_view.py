@@ -1,0 +1,186 @@
+"""Side-view bending metrics of the single-lane baseline: MDM, NMDM and bending energy (paper, Yoon et al.).
+
+Per frame: the fillet's silhouette by background subtraction, its centroid
+C_t from image moments and MDM_t = |C_t − roller axle| (px). Per fillet
+passage: NMDM = min_t MDM_t / (R + h), with R the roller radius and h the
+vertical distance from the centroid to the silhouette's top while the fillet
+is still flat on the belt (px), and BE = (P² / L) Σ κ² of a quadratic fit
+y = a x² + b x + c to the silhouette's skeleton (Zhang–Suen thinning), taken
+at the frame of minimum MDM, where the fillet bends most over the roller.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+DEFAULT_DIFF_THRESHOLD = 40
+"""Summed |RGB − background| above which a pixel belongs to a fillet."""
+DEFAULT_MIN_AREA_PX = 300
+DEFAULT_END_FRAMES = 3
+"""A passage ends after this many frames without its silhouette."""
+MAX_JUMP_PX = 150.0
+"""Largest centroid motion between frames still taken as the same fillet (a falling fillet is fast)."""
+
+
+@dataclass(frozen=True)
+class SideMeasurement:
+    """The side-view metrics of one fillet passage."""
+
+    nmdm: float
+    mdm_min_px: float
+    be: float
+    h_px: float
+    stamp_of_min: float
+    first_stamp: float
+    last_stamp: float
+    frames: int
+
+
+def silhouette(rgb: np.ndarray, background: np.ndarray, threshold: int = DEFAULT_DIFF_THRESHOLD) -> np.ndarray:
+    """uint8 mask (255 = fillet) of pixels that differ from the empty-scene background."""
+    diff = cv2.absdiff(rgb, background)
+    total = cv2.transform(diff, np.ones((1, 3), np.float32))
+    mask = cv2.compare(total, float(threshold), cv2.CMP_GT)
+    return cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
+
+
+def mdm(centroid: tuple[float, float], axle: tuple[float, float]) -> float:
+    """Distance (px) from the silhouette centroid to the roller axle."""
+    return math.hypot(centroid[0] - axle[0], centroid[1] - axle[1])
+
+
+def nmdm(min_mdm_px: float, roller_radius_px: float, h_px: float) -> float:
+    """min MDM normalised by roller radius plus the centroid-to-top distance."""
+    return min_mdm_px / (roller_radius_px + h_px)
+
+
+def zhang_suen_thinning(mask: np.ndarray) -> np.ndarray:
+    """One-pixel-wide skeleton (bool) of a binary mask, by vectorised Zhang–Suen thinning."""
+    img = np.pad((np.asarray(mask) > 0).astype(np.uint8), 1)
+    while True:
+        changed = False
+        for step in (0, 1):
+            p = [img[1:-1, 1:-1], img[:-2, 1:-1], img[:-2, 2:], img[1:-1, 2:], img[2:, 2:], img[2:, 1:-1],
+                 img[2:, :-2], img[1:-1, :-2], img[:-2, :-2]]  # P1 and its neighbours P2..P9 clockwise from north
+            neighbours = sum(p[1:]).astype(np.int32)
+            ring = p[1:] + [p[1]]
+            transitions = sum(((ring[i] == 0) & (ring[i + 1] == 1)).astype(np.int32) for i in range(8))
+            if step == 0:
+                c1, c2 = p[1] * p[3] * p[5], p[3] * p[5] * p[7]
+            else:
+                c1, c2 = p[1] * p[3] * p[7], p[1] * p[5] * p[7]
+            remove = (p[0] == 1) & (neighbours >= 2) & (neighbours <= 6) & (transitions == 1) & (c1 == 0) & (c2 == 0)
+            if remove.any():
+                img[1:-1, 1:-1][remove] = 0
+                changed = True
+        if not changed:
+            return img[1:-1, 1:-1].astype(bool)
+
+
+def bending_energy(mask: np.ndarray) -> float:
+    """BE = (P² / L) Σ κ² along a quadratic fit to the skeleton of a silhouette mask."""
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return math.nan
+    perimeter = cv2.arcLength(max(contours, key=cv2.contourArea), True)
+    skeleton = zhang_suen_thinning(mask)
+    ys, xs = np.nonzero(skeleton)
+    if xs.size < 3 or np.ptp(xs) == 0:
+        return math.nan
+    a, b, _ = np.polyfit(xs.astype(float), ys.astype(float), 2)
+    kappa = 2.0 * abs(a) / (1.0 + (2.0 * a * xs + b) ** 2) ** 1.5
+    return float(perimeter**2 / xs.size * np.sum(kappa**2))
+
+
+@dataclass
+class _Passage:
+    first_stamp: float
+    centroid: tuple[float, float]
+    last_stamp: float = 0.0
+    frames: int = 0
+    unseen: int = 0
+    h_px: float = math.nan
+    min_mdm: float = math.inf
+    stamp_of_min: float = 0.0
+    mask_at_min: np.ndarray | None = field(default=None, repr=False)
+
+
+class SidePassageTracker:
+    """Follows fillets through the side camera's view and measures each one once it has passed."""
+
+    def __init__(self, axle_px: tuple[float, float], roller_radius_px: float, background: np.ndarray | None = None,
+                 diff_threshold: int = DEFAULT_DIFF_THRESHOLD, min_area_px: int = DEFAULT_MIN_AREA_PX,
+                 end_frames: int = DEFAULT_END_FRAMES) -> None:
+        if roller_radius_px <= 0:
+            raise ValueError(f"roller_radius_px must be > 0, got {roller_radius_px}")
+        if min_area_px < 1 or end_frames < 1:
+            raise ValueError("min_area_px and end_frames must be >= 1")
+        self.axle = (float(axle_px[0]), float(axle_px[1]))
+        self.radius = float(roller_radius_px)
+        self.diff_threshold = diff_threshold
+        self.min_area_px = min_area_px
+        self.end_frames = end_frames
+        self._given_background = background
+        self.background = background
+        self._passages: list[_Passage] = []
+
+    def reset(self) -> None:
+        """Forget passages and relearn the background from the next frame (unless one was given)."""
+        self.background = self._given_background
+        self._passages = []
+
+    def update(self, rgb: np.ndarray, stamp: float) -> list[SideMeasurement]:
+        """Feed one side frame; returns the measurements of passages that ended with it."""
+        if self.background is None or self.background.shape != rgb.shape:
+            self.background = rgb.copy()
+            self._passages = []
+            return []
+        mask = silhouette(rgb, self.background, self.diff_threshold)
+        count, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        blobs = [i for i in range(1, count) if stats[i, cv2.CC_STAT_AREA] >= self.min_area_px]
+        unmatched = set(blobs)
+        for passage in sorted(self._passages, key=lambda p: -p.centroid[0]):
+            best = min(unmatched, key=lambda i: _distance(centroids[i], passage.centroid), default=None)
+            if best is None or _distance(centroids[best], passage.centroid) > MAX_JUMP_PX:
+                passage.unseen += 1
+                continue
+            unmatched.discard(best)
+            self._observe(passage, labels == best, stats[best], centroids[best], stamp)
+        for i in unmatched:
+            passage = _Passage(first_stamp=stamp, centroid=(float(centroids[i][0]), float(centroids[i][1])))
+            self._observe(passage, labels == i, stats[i], centroids[i], stamp)
+            self._passages.append(passage)
+        done = [p for p in self._passages if p.unseen >= self.end_frames]
+        self._passages = [p for p in self._passages if p.unseen < self.end_frames]
+        return [m for m in (self._measure(p) for p in done) if m is not None]
+
+    def _observe(self, passage: _Passage, mask: np.ndarray, stat: np.ndarray, centroid: np.ndarray, stamp: float) -> None:
+        u, v = float(centroid[0]), float(centroid[1])
+        passage.centroid, passage.last_stamp, passage.unseen = (u, v), stamp, 0
+        passage.frames += 1
+        x, y, w, h = (int(s) for s in stat[:4])
+        if x + w < self.axle[0] - self.radius:  # wholly on the flat belt: measure h
+            column = mask[y:y + h, min(max(int(round(u)), x), x + w - 1)]
+            rows = np.flatnonzero(column)
+            if rows.size:
+                passage.h_px = v - (y + rows[0])
+        distance = mdm((u, v), self.axle)
+        if distance < passage.min_mdm:
+            passage.min_mdm, passage.stamp_of_min = distance, stamp
+            passage.mask_at_min = mask[y:y + h, x:x + w].astype(np.uint8) * 255
+
+    def _measure(self, passage: _Passage) -> SideMeasurement | None:
+        if passage.mask_at_min is None or not math.isfinite(passage.h_px):
+            return None  # never seen flat on the belt (entered mid-fall, or a speck): no reliable h
+        be = bending_energy(np.pad(passage.mask_at_min, 1))
+        return SideMeasurement(nmdm=nmdm(passage.min_mdm, self.radius, passage.h_px), mdm_min_px=passage.min_mdm,
+                               be=be, h_px=passage.h_px, stamp_of_min=passage.stamp_of_min,
+                               first_stamp=passage.first_stamp, last_stamp=passage.last_stamp, frames=passage.frames)
+
+
+def _distance(a, b) -> float:
+    return math.hypot(float(a[0]) - float(b[0]), float(a[1]) - float(b[1]))
