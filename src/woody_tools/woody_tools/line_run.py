@@ -160,16 +160,21 @@ def run(args: argparse.Namespace) -> int:
         start("line_sim", sim_params)
         monitor = LineMonitor(lease.domain_id)
         wall_start = time.monotonic()
-        bar = tqdm(total=fillets or None, unit="fillet", desc="graded", dynamic_ncols=True)
+        bar = tqdm(total=fillets or None, unit="fillet", desc="graded", dynamic_ncols=True, mininterval=1.0,
+                   file=sys.stderr, disable=None if sys.stderr.isatty() else True)
+        last_line = 0.0
         done_since = None
         while True:
             monitor.spin(0.25)
             graded = len(monitor.verdicts)
-            bar.n = min(graded, bar.total or graded)
             elapsed = time.monotonic() - wall_start
-            bar.set_postfix_str(f"spawned {len(monitor.spawns)}, sim {monitor.sim_time:.1f} s, "
-                                f"rtf {monitor.sim_time / max(elapsed, 1e-9):.2f}x")
-            bar.refresh()
+            status = (f"spawned {len(monitor.spawns)}, sim {monitor.sim_time:.1f} s, "
+                      f"rtf {monitor.sim_time / max(elapsed, 1e-9):.2f}x")
+            if bar.disable and time.monotonic() - last_line >= 10.0:  # not a terminal: a plain line now and then
+                print(f"graded {graded}/{fillets or '?'} fillets, {status}", file=sys.stderr, flush=True)
+                last_line = time.monotonic()
+            bar.update(min(graded, bar.total or graded) - bar.n)
+            bar.set_postfix_str(status, refresh=False)
             dead = [n for n in nodes if not n.alive()]
             if dead:
                 node = dead[0]

@@ -306,8 +306,10 @@ class BagWriter:
     """An MCAP bag being written: `add_topic`, `write`, `flush`, `close` (also a context manager).
 
     Not thread-safe: call it from one thread. ``compression`` is ``zstd``, ``lz4`` or
-    ``none``; ``metadata`` (str → str) is written at once as the metadata record
-    ``woody`` so it survives a crash; `add_metadata` adds more records.
+    ``none``; ``metadata`` (values that are not strings are stored as JSON) is written
+    at once as the metadata record ``woody`` (plus ``library`` and ``created``), so it
+    survives a crash; `add_metadata` adds more records. A file that exists is an
+    error unless ``overwrite``. `write` takes the topic of an earlier `add_topic`.
     """
 
     def __init__(self, path: str | os.PathLike, *, chunk_size: int = DEFAULT_CHUNK_SIZE,
@@ -338,8 +340,7 @@ class BagWriter:
         self.bytes_written = 0
         self._pending = 0
         self._closed = False
-        info = {"library": LIBRARY, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                "log_time": "system clock at reception, ns since the Unix epoch"}
+        info = {"library": LIBRARY, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         info.update({k: v if isinstance(v, str) else json.dumps(v) for k, v in (metadata or {}).items()})
         self.add_metadata("woody", info)
 
@@ -478,7 +479,7 @@ def _stream_records(handle: io.BufferedReader) -> Iterator[Any]:
             if isinstance(record, Chunk):
                 if record.compression == "" and len(record.data) != record.uncompressed_size:
                     raise _Truncated()
-                yield from list(breakup_chunk(record, validate_crc=False))
+                yield from list(breakup_chunk(record, validate_crc=True))
             elif isinstance(record, (DataEnd, Footer)):
                 return
             else:
@@ -512,7 +513,7 @@ def read_bag(path: str | os.PathLike, topics: Iterable[str] | None = None) -> It
         summary = _summary(path, handle)
         if summary is not None:
             handle.seek(0)
-            reader = SeekingReader(handle)
+            reader = SeekingReader(handle, validate_crcs=True)  # crc32 runs at ~4 GB/s here
             try:
                 for schema, channel, message in reader.iter_messages(topics=wanted, log_time_order=True):
                     if first is None:
@@ -520,7 +521,7 @@ def read_bag(path: str | os.PathLike, topics: Iterable[str] | None = None) -> It
                     last = message.log_time
                     count += 1
                     yield BagMessage(channel.topic, schema.name if schema else "", message.data, message.log_time)
-            except (McapError, EOFError, struct.error, ValueError, KeyError, OSError) as exc:
+            except Exception as exc:  # noqa: BLE001 - zstd, struct, mcap errors alike: damaged data
                 raise BagError(f"{path}: corrupt after {count} messages at {_seconds(first, last)} "
                                f"({type(exc).__name__}: {exc})".replace("\n", " ")) from None
             return

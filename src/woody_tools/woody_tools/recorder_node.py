@@ -50,9 +50,9 @@ import signal
 import sys
 import threading
 import time
-from pathlib import Path
 
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.exceptions import InvalidParameterTypeException, ParameterException
@@ -101,6 +101,8 @@ class Recorder(Node):
             "recorder": "woody_tools.recorder_node", "topics": sorted(self._topics),
             "topic_regex": p("topic_regex").value, "exclude_regex": p("exclude_regex").value,
             "use_sim_time": bool(p("use_sim_time").value), "start_unix_ns": time.time_ns(),
+            "log_time": "system (wall) clock at reception, ns since the Unix epoch",
+            "publish_time": "publisher's source timestamp (wall clock)",
         }
         try:
             self._writer = BagWriter(output, chunk_size=int(p("chunk_size").value),
@@ -122,7 +124,8 @@ class Recorder(Node):
         self._thread = threading.Thread(target=self._write_loop, name="mcap-writer", daemon=True)
         self._thread.start()
         self._discover()
-        self.create_timer(discovery_period, self._discover)
+        # Steady clock: with use_sim_time the graph's /clock may only start once we subscribe.
+        self.create_timer(discovery_period, self._discover, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f"recording to {self.output} ({'topics ' + ', '.join(sorted(self._topics)) if self._topics else ''}"
             f"{' regex ' + self._regex.pattern if self._regex else ''}"

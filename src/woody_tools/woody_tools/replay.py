@@ -24,9 +24,11 @@ Exit codes: 0 when the bag (or its readable part) was played or the replay was
 stopped by SIGINT/SIGTERM; 2 with one line on stderr, no traceback, when the
 bag is missing, not an MCAP, holds none of the requested topics or nothing
 playable, or an argument is invalid; 1 for a failure of ROS itself. A
-truncated bag (a killed recorder) plays up to where it is readable, then one
-line on stderr says where it stopped, and the exit code is still 0: the data
-that exists was replayed completely.
+truncated bag (a killed recorder) or one with a damaged chunk (CRC mismatch)
+plays up to where it is readable, then one line on stderr says where it
+stopped (``replay: <bag>: truncated after N messages at t=12.345s; stopped
+there``), and the exit code is still 0: the data that exists was replayed
+completely. With ``--loop`` the readable part loops and the line is printed once.
 """
 
 from __future__ import annotations

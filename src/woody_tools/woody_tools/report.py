@@ -220,7 +220,8 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
     ax.set_xticks(range(len(ks)), [f"k={k:g}" for k in ks])
     ax.set_ylabel("shape score Φ")
     ax.set_title("Φ per stiffness and lane")
-    ax.legend(fontsize=8)
+    if lanes:
+        ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out_dir / "phi_by_k_lane.png", dpi=110)
     plt.close(fig)

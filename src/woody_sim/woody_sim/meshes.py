@@ -1,0 +1,619 @@
+"""Fillet meshes: load and orient them, generate new ones, import scans the paper's way.
+
+Every fillet lives in one *canonical frame* so the physics, the renderer and the
+experiments agree on what "length" and "leading end" mean:
+
+* x = length, the flow direction on the belt; the narrow tip points to +x, so it
+  leads over the roller edge and the wide, rigid end trails (the paper's vision
+  cuts the tip off the contour and tracks the trailing edge);
+* y = width, z = thickness; the flat bottom lies in the plane z = 0;
+* the footprint's bounding box is centred on x = y = 0.
+
+The paper's data set is depth-map based (PCA-aligned scans projected to depth
+maps, a GAN generating new depth maps, rebuilt as watertight meshes with a flat
+bottom). This module follows the same pipeline with a parametric generator in
+place of the GAN: :func:`generate_fillet` draws a teardrop depth map from a seed,
+:func:`depth_map_to_mesh` rebuilds it, :func:`scan_to_depth_map` imports point
+clouds. Every fillet also exposes a :class:`HeightMap` (its top surface seen from
+above), which is what :mod:`woody_sim.fillet_model` slices into segments.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from scipy import ndimage
+
+MESH_SUFFIXES = (".obj", ".ply", ".stl")
+BUILTIN_DIR = Path(__file__).resolve().parent / "meshes"
+BUILTIN_REFERENCE_NAMES = ("seed0000", "seed0001", "seed0002")
+BUILTIN_GENERATED_SEEDS = (0, 1, 2)
+"""Seeds of the generated fillets that ``builtin`` adds to the three reference meshes."""
+
+LENGTH_RANGE = (0.17, 0.22)
+WIDTH_RANGE = (0.08, 0.11)
+THICKNESS_RANGE = (0.020, 0.035)
+"""Real fillet dimensions (m) the generator draws from (cf. the reference meshes)."""
+
+HEIGHT_MAP_PIXEL = 0.0005
+"""Resolution (m) of the height map rasterised from a loaded mesh."""
+MAX_HOLE_EDGES = 12
+"""Holes with at most this many boundary edges are closed on load; larger ones make the mesh unusable."""
+MIN_EXTENT = 0.005
+"""A fillet thinner than this (m) along any axis is rejected as degenerate."""
+
+
+class MeshError(ValueError):
+    """A mesh file that cannot become a fillet; the message is one line naming the file and the reason."""
+
+
+@dataclass(frozen=True, eq=False)
+class HeightMap:
+    """The top surface of a fillet seen from above: height above the flat bottom on a square grid."""
+
+    heights: np.ndarray
+    """(ny, nx) metres; 0 outside the footprint. Row index follows y, column index follows x."""
+    x0: float
+    """x of the centre of pixel column 0 (m)."""
+    y0: float
+    """y of the centre of pixel row 0 (m)."""
+    pixel: float
+    """Pixel size (m)."""
+
+    def sample(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Bilinear height at world points (arrays broadcast); 0 outside the grid."""
+        x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+        coords = np.stack([(y - self.y0) / self.pixel, (x - self.x0) / self.pixel])
+        flat = ndimage.map_coordinates(self.heights, coords.reshape(2, -1), order=1, mode="constant", cval=0.0)
+        return flat.reshape(x.shape)
+
+    def y_range(self) -> tuple[float, float]:
+        """Full y extent covered by the grid (m)."""
+        return self.y0 - 0.5 * self.pixel, self.y0 + (self.heights.shape[0] - 0.5) * self.pixel
+
+    def footprint_interval(self, x: float, threshold: float = 1e-4) -> tuple[float, float] | None:
+        """(y_min, y_max) of the footprint at one x, with sub-pixel edges; None where the fillet is absent."""
+        lo, hi = self.y_range()
+        ys = np.arange(lo, hi + 1e-12, self.pixel / 2.0)
+        h = self.sample(np.full_like(ys, x), ys) - threshold
+        inside = np.flatnonzero(h > 0.0)
+        if inside.size == 0:
+            return None
+        first, last = inside[0], inside[-1]
+        step = ys[1] - ys[0]
+        y_min = ys[first] if first == 0 else ys[first - 1] + step * h[first - 1] / (h[first - 1] - h[first])
+        y_max = ys[last] if last == ys.size - 1 else ys[last] + step * h[last] / (h[last] - h[last + 1])
+        return float(y_min), float(y_max)
+
+
+@dataclass(frozen=True, eq=False)
+class FilletMesh:
+    """A fillet surface in the canonical frame (see the module docstring). Treat it as read-only."""
+
+    name: str
+    mesh: trimesh.Trimesh
+    source: str = ""
+    """Where it came from: a file path, ``generated:<seed>`` or ``scan``."""
+
+    @property
+    def length(self) -> float:
+        return float(self.mesh.extents[0])
+
+    @property
+    def width(self) -> float:
+        return float(self.mesh.extents[1])
+
+    @property
+    def thickness(self) -> float:
+        return float(self.mesh.extents[2])
+
+    @cached_property
+    def height_map(self) -> HeightMap:
+        """Top surface rasterised at :data:`HEIGHT_MAP_PIXEL`; the slicer and the visuals read it."""
+        return rasterize_top(self.mesh.vertices, self.mesh.faces, HEIGHT_MAP_PIXEL)
+
+
+# --------------------------------------------------------------------------- rasterising
+
+
+def rasterize_top(vertices: np.ndarray, faces: np.ndarray, pixel: float) -> HeightMap:
+    """Upper envelope of a triangle soup seen from +z, like a nadir depth camera.
+
+    Vectorised barycentric rasterisation (triangles grouped by their pixel
+    footprint), so it needs no ray-casting library and works for any winding.
+    Heights are measured from the lowest vertex.
+    """
+    vertices = np.asarray(vertices, dtype=float)
+    z_min = vertices[:, 2].min()
+    lo = vertices[:, :2].min(axis=0) - pixel
+    hi = vertices[:, :2].max(axis=0) + pixel
+    nx = int(math.ceil((hi[0] - lo[0]) / pixel)) + 1
+    ny = int(math.ceil((hi[1] - lo[1]) / pixel)) + 1
+    tri = vertices[np.asarray(faces)]
+    u = (tri[:, :, 0] - lo[0]) / pixel
+    v = (tri[:, :, 1] - lo[1]) / pixel
+    z = tri[:, :, 2] - z_min
+    det = (u[:, 1] - u[:, 0]) * (v[:, 2] - v[:, 0]) - (u[:, 2] - u[:, 0]) * (v[:, 1] - v[:, 0])
+    i0 = np.ceil(u.min(axis=1)).astype(int)
+    i1 = np.floor(u.max(axis=1)).astype(int)
+    j0 = np.ceil(v.min(axis=1)).astype(int)
+    j1 = np.floor(v.max(axis=1)).astype(int)
+    size = np.maximum(i1 - i0, j1 - j0) + 1
+    usable = (np.abs(det) > 1e-12) & (i1 >= i0) & (j1 >= j0)
+    heights = np.full(nx * ny, -np.inf)
+    k_prev = 0
+    k = 1
+    while k_prev < (size[usable].max() if usable.any() else 0):
+        sel = np.flatnonzero(usable & (size > k_prev) & (size <= k))
+        if sel.size:
+            di, dj = np.meshgrid(np.arange(k), np.arange(k))
+            pu = i0[sel, None] + di.ravel()[None, :]
+            pv = j0[sel, None] + dj.ravel()[None, :]
+            uu, vv, d = u[sel], v[sel], det[sel, None]
+            w1 = ((pu - uu[:, :1]) * (vv[:, 2:3] - vv[:, :1]) - (uu[:, 2:3] - uu[:, :1]) * (pv - vv[:, :1])) / d
+            w2 = ((uu[:, 1:2] - uu[:, :1]) * (pv - vv[:, :1]) - (pu - uu[:, :1]) * (vv[:, 1:2] - vv[:, :1])) / d
+            w0 = 1.0 - w1 - w2
+            eps = 1e-9
+            inside = (w0 >= -eps) & (w1 >= -eps) & (w2 >= -eps) & (pu <= i1[sel, None]) & (pv <= j1[sel, None])
+            zz = w0 * z[sel, :1] + w1 * z[sel, 1:2] + w2 * z[sel, 2:3]
+            np.maximum.at(heights, (pv * nx + pu)[inside], zz[inside])
+        k_prev, k = k, k * 2
+    heights = np.where(np.isfinite(heights), np.maximum(heights, 0.0), 0.0).reshape(ny, nx)
+    return HeightMap(heights=heights, x0=float(lo[0]), y0=float(lo[1]), pixel=float(pixel))
+
+
+# --------------------------------------------------------------------------- orientation
+
+
+def canonical_rotation(points: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """Rotation (3x3, rows = new x, y, z axes) taking a fillet-shaped cloud to the canonical frame.
+
+    PCA gives the axes (largest spread = length, smallest = thickness). Signs:
+    the footprint rim must sit low (a dome, or a flat bottom under a dome, has
+    its outline near the bottom), and the end of the length axis with less
+    surface (the narrow tip) goes to +x. y completes a right-handed frame, so a
+    fillet is never mirrored.
+    """
+    pts = np.asarray(points, dtype=float)
+    w = np.ones(len(pts)) if weights is None else np.asarray(weights, dtype=float)
+    w = w / w.sum()
+    centred = pts - w @ pts
+    _, vecs = np.linalg.eigh((centred * w[:, None]).T @ centred)
+    x_axis, z_axis = vecs[:, 2], vecs[:, 0]
+    local = centred @ np.stack([x_axis, np.cross(z_axis, x_axis), z_axis]).T
+    if _rim_is_high(local, w):
+        z_axis = -z_axis
+    x_coord = centred @ x_axis
+    span = x_coord.max() - x_coord.min()
+    low_end = w[x_coord < x_coord.min() + 0.25 * span].sum()
+    high_end = w[x_coord > x_coord.max() - 0.25 * span].sum()
+    if high_end > low_end:
+        x_axis = -x_axis
+    return np.stack([x_axis, np.cross(z_axis, x_axis), z_axis])
+
+
+def _rim_is_high(local: np.ndarray, w: np.ndarray) -> bool:
+    """True if points near the footprint outline sit higher than those near its centre (upside down)."""
+    half = np.maximum(0.5 * (local[:, :2].max(axis=0) - local[:, :2].min(axis=0)), 1e-12)
+    mid = 0.5 * (local[:, :2].max(axis=0) + local[:, :2].min(axis=0))
+    radius = np.sqrt((((local[:, :2] - mid) / half) ** 2).sum(axis=1))
+    rim = radius >= np.quantile(radius, 0.8)
+    core = radius <= np.quantile(radius, 0.5)
+    z = local[:, 2]
+    return bool(np.average(z[rim], weights=w[rim]) > np.average(z[core], weights=w[core]))
+
+
+def _level_bottom(points: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Rotation (rows = new axes) that makes a flat bottom, if the cloud has one, exactly horizontal.
+
+    Expects a cloud already roughly in the canonical frame. PCA's thinnest
+    axis is a few degrees off when the dome is lopsided; the flat bottom, when
+    there is one (a dense plane of points at the lowest level), is the better
+    reference for "down". Without one the rotation is the identity.
+    """
+    z = points[:, 2]
+    near = z < z.min() + 0.1 * (z.max() - z.min())
+    if near.sum() < 3 or weights[near].sum() < 0.15 * weights.sum():
+        return np.eye(3)
+    base = points[near] - np.average(points[near], axis=0, weights=weights[near])
+    normal = np.linalg.svd(base * np.sqrt(weights[near, None]), full_matrices=False)[2][2]
+    if np.sqrt(np.average((base @ normal) ** 2, weights=weights[near])) > 0.02 * (z.max() - z.min()):
+        return np.eye(3)
+    z_axis = normal if normal[2] > 0 else -normal
+    x_axis = np.array([1.0, 0.0, 0.0]) - z_axis[0] * z_axis
+    x_axis /= np.linalg.norm(x_axis)
+    return np.stack([x_axis, np.cross(z_axis, x_axis), z_axis])
+
+
+def orient_canonical(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """A copy of the mesh moved into the canonical frame (module docstring)."""
+    weights = mesh.area_faces
+    if weights.sum() <= 0.0:
+        weights = np.ones(len(mesh.faces))
+    centres = mesh.triangles_center
+    rot = canonical_rotation(centres, weights)
+    rot = _level_bottom(centres @ rot.T, weights) @ rot
+    out = mesh.copy()
+    out.apply_transform(_homogeneous(rot))
+    return _centre(out)
+
+
+def _homogeneous(rot: np.ndarray) -> np.ndarray:
+    mat = np.eye(4)
+    mat[:3, :3] = rot
+    return mat
+
+
+def _centre(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """Centre the footprint's bounding box on x = y = 0 and put the bottom at z = 0."""
+    lo, hi = mesh.bounds
+    mesh.apply_translation([-(lo[0] + hi[0]) / 2.0, -(lo[1] + hi[1]) / 2.0, -lo[2]])
+    return mesh
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def _boundary_loops(faces: np.ndarray) -> list[list[int]] | None:
+    """Directed boundary loops of a triangle mesh; None if the boundary is not a set of simple loops."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    _, inverse, counts = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True, return_counts=True)
+    boundary = directed[counts[inverse.ravel()] == 1]
+    nxt: dict[int, int] = {}
+    for a, b in boundary.tolist():
+        if a in nxt:
+            return None
+        nxt[a] = b
+    loops = []
+    while nxt:
+        start, loop = next(iter(nxt)), []
+        vertex = start
+        while vertex in nxt:
+            loop.append(vertex)
+            vertex = nxt.pop(vertex)
+        if vertex != start:
+            return None
+        loops.append(loop)
+    return loops
+
+
+def _repair(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
+    """Drop duplicate faces and close small holes; raise MeshError if the surface stays open.
+
+    trimesh's loader has already merged coincident vertices (process=True).
+    """
+    mesh.update_faces(mesh.unique_faces())
+    mesh.remove_unreferenced_vertices()
+    loops = _boundary_loops(mesh.faces)
+    if loops is None:
+        raise MeshError(f"{label}: open mesh with a non-manifold boundary")
+    too_big = [len(loop) for loop in loops if len(loop) > MAX_HOLE_EDGES]
+    if too_big:
+        raise MeshError(f"{label}: open mesh (hole of {max(too_big)} edges, at most {MAX_HOLE_EDGES} can be closed)")
+    if loops:
+        patches = [[loop[0], loop[i + 1], loop[i]] for loop in loops for i in range(1, len(loop) - 1)]
+        faces = np.vstack([mesh.faces, np.asarray(patches, dtype=np.int64)])
+        mesh = trimesh.Trimesh(mesh.vertices, faces, process=False)
+    if not mesh.is_watertight:
+        raise MeshError(f"{label}: non-manifold mesh (edges shared by more than two faces)")
+    return mesh
+
+
+def load_mesh(path: str | Path) -> FilletMesh:
+    """Load an OBJ/PLY/STL fillet, repair small defects and move it to the canonical frame."""
+    path = Path(path)
+    label = str(path)
+    if not path.is_file():
+        raise MeshError(f"{label}: file not found")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise MeshError(f"{label}: unsupported format '{path.suffix}' (use {', '.join(MESH_SUFFIXES)})")
+    if path.stat().st_size == 0:
+        raise MeshError(f"{label}: empty file")
+    try:
+        loaded = trimesh.load(path, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many types for malformed files
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise MeshError(f"{label}: not a readable mesh ({reason})") from exc
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise MeshError(f"{label}: no triangles in file")
+    if not np.isfinite(loaded.vertices).all():
+        raise MeshError(f"{label}: non-finite vertex coordinates")
+    mesh = orient_canonical(_repair(loaded, label))
+    if mesh.extents.min() < MIN_EXTENT:
+        dims = " x ".join(f"{e * 1000:.1f}" for e in mesh.extents)
+        raise MeshError(f"{label}: degenerate mesh ({dims} mm; every side must be at least {MIN_EXTENT * 1000:.0f} mm)")
+    return FilletMesh(name=path.stem, mesh=mesh, source=label)
+
+
+# --------------------------------------------------------------------------- depth maps
+
+
+def _clean_mask(depth: np.ndarray) -> np.ndarray:
+    """Depth map restricted to one solid, 4-connected footprint without diagonal pinches.
+
+    Pinches (two pixels touching only at a corner) would make a non-manifold
+    edge in the rebuilt mesh; they are closed with the mean of the neighbours.
+    """
+    depth = np.where(np.isfinite(depth) & (depth > 0.0), depth, 0.0)
+    labels, count = ndimage.label(depth > 0.0)
+    if count == 0:
+        raise ValueError("depth map has no pixel above zero")
+    largest = 1 + int(np.argmax(ndimage.sum_labels(np.ones_like(depth), labels, index=np.arange(1, count + 1))))
+    mask = ndimage.binary_fill_holes(labels == largest)
+    kernel = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], dtype=float)
+    depth = np.where(mask, depth, 0.0)
+    for _ in range(depth.size):
+        m = np.pad(mask, 1)
+        a, b, c, d = m[:-1, :-1], m[:-1, 1:], m[1:, 1:], m[1:, :-1]
+        pinch_ac = a & c & ~b & ~d
+        pinch_bd = b & d & ~a & ~c
+        if not (pinch_ac.any() or pinch_bd.any()):
+            break
+        add = np.zeros_like(m)
+        add[:-1, 1:] |= pinch_ac
+        add[:-1, :-1] |= pinch_bd
+        add = add[1:-1, 1:-1] & ~mask
+        sums = ndimage.convolve(depth, kernel, mode="constant")
+        counts = ndimage.convolve(mask.astype(float), kernel, mode="constant")
+        depth = np.where(add, sums / np.maximum(counts, 1.0), depth)
+        mask = mask | add
+    return np.where(mask, np.maximum(depth, 1e-6), 0.0)
+
+
+def depth_map_to_mesh(depth: np.ndarray, pixel_size: float | tuple[float, float]) -> trimesh.Trimesh:
+    """Watertight fillet mesh from a height map: top surface from the depths, flat bottom, stitched rim.
+
+    ``depth`` is (ny, nx) heights in metres above the bottom (0 = no fillet);
+    rows follow y and columns x, pixel centres are centred on the origin.
+    Pixels are the cells of the mesh; each grid node takes the mean height of
+    the fillet pixels around it, and the outline is closed by vertical walls.
+    """
+    dx, dy = (pixel_size, pixel_size) if np.isscalar(pixel_size) else pixel_size
+    if not (dx > 0 and dy > 0):
+        raise ValueError(f"pixel size must be positive, got {pixel_size}")
+    depth = _clean_mask(np.asarray(depth, dtype=float))
+    mask = depth > 0.0
+    ny, nx = depth.shape
+    padded = np.pad(depth, 1)
+    pm = np.pad(mask, 1).astype(float)
+    node_sum = padded[:-1, :-1] + padded[:-1, 1:] + padded[1:, :-1] + padded[1:, 1:]
+    node_cnt = pm[:-1, :-1] + pm[:-1, 1:] + pm[1:, :-1] + pm[1:, 1:]
+    used = node_cnt > 0
+    node_height = np.where(used, node_sum / np.maximum(node_cnt, 1.0), 0.0)
+    rows, cols = np.nonzero(used)
+    n_used = rows.size
+    top_id = np.full(used.shape, -1)
+    top_id[rows, cols] = np.arange(n_used)
+    bottom_id = top_id + n_used
+    xs = (cols - 0.5 - (nx - 1) / 2.0) * dx
+    ys = (rows - 0.5 - (ny - 1) / 2.0) * dy
+    vertices = np.vstack(
+        [np.column_stack([xs, ys, node_height[rows, cols]]), np.column_stack([xs, ys, np.zeros(n_used)])]
+    )
+    pi, pj = np.nonzero(mask)
+    a, b = (pi, pj), (pi, pj + 1)
+    c, d = (pi + 1, pj + 1), (pi + 1, pj)
+    ta, tb, tc, td = top_id[a], top_id[b], top_id[c], top_id[d]
+    ba, bb, bc, bd = bottom_id[a], bottom_id[b], bottom_id[c], bottom_id[d]
+    faces = [
+        np.column_stack([ta, tb, tc]),
+        np.column_stack([ta, tc, td]),
+        np.column_stack([ba, bc, bb]),
+        np.column_stack([ba, bd, bc]),
+    ]
+    mp = np.pad(mask, 1)
+    sides = [  # (outside neighbour, directed edge p -> q with the pixel on its left)
+        (~mp[pi, pj + 1], (ta, tb), (ba, bb)),  # y- side
+        (~mp[pi + 1, pj + 2], (tb, tc), (bb, bc)),  # x+ side
+        (~mp[pi + 2, pj + 1], (tc, td), (bc, bd)),  # y+ side
+        (~mp[pi + 1, pj], (td, ta), (bd, ba)),  # x- side
+    ]
+    for open_side, (tp, tq), (bp, bq) in sides:
+        faces.append(np.column_stack([tp, bp, bq])[open_side])
+        faces.append(np.column_stack([tp, bq, tq])[open_side])
+    return trimesh.Trimesh(vertices, np.vstack(faces), process=False)
+
+
+def _smooth_noise(rng: np.random.Generator, shape: tuple[int, ...], sigma: float) -> np.ndarray:
+    """Low-frequency noise with unit standard deviation (Gaussian-filtered white noise)."""
+    field = ndimage.gaussian_filter(rng.standard_normal(shape), sigma, mode="reflect")
+    return field / max(field.std(), 1e-12)
+
+
+def generate_depth_map(seed: int, shape: tuple[int, int] = (64, 128)) -> tuple[np.ndarray, float]:
+    """A random fillet depth map (heights in m, tip at +x) and its square pixel size (m).
+
+    Teardrop outline: the half-width follows sin(pi t^p)^q along the length
+    (t = 0 at the rounded wide end, 1 at the narrow tip), each side with its own
+    smooth ripple and a slightly bent centre line; the thickness peaks in a
+    lopsided hump towards the wide half and falls to rounded edges across;
+    smooth 2-D noise adds the natural lumps.
+    """
+    rng = np.random.default_rng(seed)
+    ny, nx = shape
+    length = rng.uniform(*LENGTH_RANGE)
+    width = rng.uniform(*WIDTH_RANGE)
+    thickness = rng.uniform(*THICKNESS_RANGE)
+    pixel = max(length / (nx - 6), width * 1.3 / (ny - 6))
+    x = (np.arange(nx) - (nx - 1) / 2.0) * pixel
+    y = (np.arange(ny) - (ny - 1) / 2.0) * pixel
+    t = np.clip((x + length / 2.0) / length, 0.0, 1.0)
+    p_out, q_out = rng.uniform(0.5, 0.72), rng.uniform(0.55, 0.85)
+    half = 0.5 * width * np.sin(np.pi * t**p_out) ** q_out
+    ripple = 0.07 * _smooth_noise(rng, (2, nx), sigma=(0.0, nx / 12.0))
+    centre = width * rng.uniform(-0.08, 0.08) * np.sin(np.pi * t) ** 2
+    rel = y[:, None] - centre[None, :]
+    side_half = np.where(rel >= 0, (half * (1.0 + ripple[0]))[None, :], (half * (1.0 - ripple[1]))[None, :])
+    v = np.abs(rel) / np.maximum(side_half, 1e-9)
+    inside = (v < 1.0) & (t[None, :] > 0.0) & (t[None, :] < 1.0)
+    p_thk, q_thk = rng.uniform(0.6, 0.85), rng.uniform(0.45, 0.7)
+    along = np.sin(np.pi * t**p_thk) ** q_thk
+    r_exp, e_exp = rng.uniform(1.8, 2.6), rng.uniform(0.4, 0.6)
+    across = np.clip(1.0 - v**r_exp, 0.0, 1.0) ** e_exp
+    hump_t, hump_v = rng.uniform(0.3, 0.6), rng.uniform(-0.35, 0.35)
+    hump = np.exp(-(((t[None, :] - hump_t) / 0.2) ** 2) - ((rel / np.maximum(side_half, 1e-9) - hump_v) / 0.45) ** 2)
+    lumps = 1.0 + 0.12 * _smooth_noise(rng, (ny, nx), sigma=6.0)
+    heights = np.where(inside, along[None, :] * across * (1.0 + rng.uniform(0.2, 0.5) * hump) * lumps, 0.0)
+    heights *= thickness / heights.max()
+    heights = np.where(inside, np.maximum(heights, 0.0008), 0.0)
+    return heights, float(pixel)
+
+
+def generate_fillet(seed: int) -> FilletMesh:
+    """A reproducible synthetic fillet (same seed, same mesh) sized to real fillet ranges."""
+    if int(seed) != seed or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    depth, pixel = generate_depth_map(int(seed))
+    mesh = _centre(depth_map_to_mesh(depth, pixel))
+    return FilletMesh(name=f"generated-{int(seed):04d}", mesh=mesh, source=f"generated:{int(seed)}")
+
+
+# --------------------------------------------------------------------------- scans
+
+
+@dataclass(frozen=True, eq=False)
+class ScanDepthMap:
+    """A scan in the paper's normalised form: PCA-aligned, unit-sphere scaled, projected to a depth map."""
+
+    depth: np.ndarray
+    """(n, n) heights divided by the data-set-wide maximum height, in [0, 1]."""
+    pixel: float
+    """Pixel size in unit-sphere units (the grid spans [-1, 1] in x and y)."""
+    scale: float
+    """Metres per unit-sphere unit: the radius the scan was divided by."""
+    max_height: float
+    """The data-set-wide maximum height (unit-sphere units) the depths are normalised by."""
+
+
+def _align_scan(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """PCA-aligned points scaled into the unit sphere (about the centroid), bottom at z = 0, and the scale."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 100 or not np.isfinite(pts).all():
+        raise ValueError("a scan must be an (n >= 100, 3) array of finite points")
+    centred = pts - pts.mean(axis=0)
+    rot = canonical_rotation(centred)
+    rot = _level_bottom(centred @ rot.T, np.ones(len(centred))) @ rot
+    aligned = centred @ rot.T
+    scale = float(np.linalg.norm(aligned, axis=1).max())
+    if scale <= 0.0:
+        raise ValueError("scan points are all identical")
+    unit = aligned / scale
+    unit[:, 2] -= unit[:, 2].min()
+    return unit, scale
+
+
+def scan_height(points: np.ndarray) -> float:
+    """Height of one scan in unit-sphere units; the data-set-wide maximum of these normalises depth maps."""
+    return float(_align_scan(points)[0][:, 2].max())
+
+
+def scan_to_depth_map(points: np.ndarray, max_height: float | None = None, grid: int = 128) -> ScanDepthMap:
+    """Project a fillet point cloud to a depth map the way the paper prepares its scans.
+
+    PCA alignment removes the pose, scaling into the unit sphere removes the
+    size, and heights are divided by ``max_height`` (the largest
+    :func:`scan_height` over the data set, so relative thickness between
+    fillets survives; defaults to this scan's own height). Pixels without
+    points inside the footprint are closed from their neighbours.
+    """
+    unit, scale = _align_scan(points)
+    height = float(unit[:, 2].max())
+    max_height = height if max_height is None else float(max_height)
+    if max_height <= 0.0:
+        raise ValueError(f"max_height must be positive, got {max_height}")
+    if grid < 16:
+        raise ValueError(f"grid must be at least 16 pixels, got {grid}")
+    pixel = 2.0 / grid
+    col = np.clip(((unit[:, 0] + 1.0) / pixel).astype(int), 0, grid - 1)
+    row = np.clip(((unit[:, 1] + 1.0) / pixel).astype(int), 0, grid - 1)
+    top = np.full(grid * grid, -np.inf)
+    np.maximum.at(top, row * grid + col, unit[:, 2])
+    top = top.reshape(grid, grid)
+    seen = np.isfinite(top)
+    footprint = ndimage.binary_fill_holes(ndimage.binary_closing(seen, iterations=2) | seen)
+    closed = ndimage.grey_closing(np.where(seen, top, 0.0), size=(3, 3))
+    depth = np.where(footprint, np.maximum(np.where(seen, top, 0.0), closed), 0.0)
+    return ScanDepthMap(depth=np.clip(depth / max_height, 0.0, 1.0), pixel=pixel, scale=scale, max_height=max_height)
+
+
+def scan_depth_map_to_fillet(scan: ScanDepthMap, name: str = "scan") -> FilletMesh:
+    """Rebuild a normalised scan depth map as a watertight fillet at its physical size."""
+    heights = scan.depth * scan.max_height * scan.scale
+    mesh = _centre(depth_map_to_mesh(heights, scan.pixel * scan.scale))
+    return FilletMesh(name=name, mesh=mesh, source="scan")
+
+
+def scan_to_fillet(
+    points: np.ndarray, max_height: float | None = None, grid: int = 128, name: str = "scan"
+) -> FilletMesh:
+    """Import a point-cloud scan as a fillet: :func:`scan_to_depth_map` then the depth-map rebuild."""
+    return scan_depth_map_to_fillet(scan_to_depth_map(points, max_height, grid), name)
+
+
+# --------------------------------------------------------------------------- mesh sets
+
+
+@functools.lru_cache(maxsize=None)
+def _builtin_reference(name: str) -> FilletMesh:
+    return load_mesh(BUILTIN_DIR / f"{name}.obj")
+
+
+@functools.lru_cache(maxsize=None)
+def _cached_generated(seed: int) -> FilletMesh:
+    return generate_fillet(seed)
+
+
+def _parse_generated(item: str) -> list[int]:
+    parts = item.split(":")
+    try:
+        count = int(parts[1])
+        base = int(parts[2]) if len(parts) == 3 else 0
+    except (IndexError, ValueError):
+        raise ValueError(f"mesh spec '{item}': expected generated:N or generated:N:SEED") from None
+    if len(parts) > 3 or count < 1 or base < 0:
+        raise ValueError(f"mesh spec '{item}': N must be >= 1 and SEED >= 0")
+    return [base * 10_000 + i for i in range(count)]
+
+
+def load_mesh_set(spec: str) -> tuple[list[FilletMesh], list[str]]:
+    """Fillets named by a comma-separated spec, plus one error line per file that could not be used.
+
+    Items: ``builtin`` (the three reference meshes and three generated ones),
+    ``generated:N`` / ``generated:N:SEED`` (N fillets with seeds SEED*10000 + i),
+    a folder (every .obj/.ply/.stl in it, sorted) or a single mesh file.
+    A malformed spec or a missing path raises ValueError; bad files inside a
+    folder are reported and skipped so one broken scan does not stop a run.
+    """
+    fillets: list[FilletMesh] = []
+    errors: list[str] = []
+    items = [item.strip() for item in spec.split(",") if item.strip()]
+    if not items:
+        raise ValueError("empty mesh spec")
+    for item in items:
+        if item == "builtin":
+            fillets += [_builtin_reference(name) for name in BUILTIN_REFERENCE_NAMES]
+            fillets += [_cached_generated(seed) for seed in BUILTIN_GENERATED_SEEDS]
+        elif item.startswith("generated:"):
+            fillets += [_cached_generated(seed) for seed in _parse_generated(item)]
+        else:
+            path = Path(item).expanduser()
+            if path.is_dir():
+                files = sorted(f for f in path.iterdir() if f.is_file() and f.suffix.lower() in MESH_SUFFIXES)
+                if not files:
+                    errors.append(f"{path}: no {', '.join(MESH_SUFFIXES)} files in folder")
+                for file in files:
+                    try:
+                        fillets.append(load_mesh(file))
+                    except MeshError as exc:
+                        errors.append(str(exc))
+            elif path.is_file():
+                fillets.append(load_mesh(path))
+            else:
+                raise ValueError(f"mesh spec '{item}': not 'builtin', 'generated:N[:SEED]', a folder or a mesh file")
+    return fillets, errors
