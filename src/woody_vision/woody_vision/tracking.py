@@ -1,0 +1,154 @@
+"""Frame-to-frame fillet tracking by nearest centroid (paper: Euclidean centroid distance).
+
+Blobs are matched to tracks with a minimum-total-distance assignment
+(``scipy.optimize.linear_sum_assignment``) between each track's predicted
+centroid and the blob centroids, gated by ``max_distance_px``. The prediction
+is the last centroid plus the last observed per-frame motion, so a track that
+missed a few frames is still found downstream. Unmatched blobs open tracks with
+new, never reused integer ids; a track ends once it has gone ``max_unseen``
+consecutive frames without a match (paper: 15).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Sequence
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from woody_vision.camera_model import LaneLayout
+from woody_vision.segmentation import Blob
+
+DEFAULT_MAX_UNSEEN = 15
+"""Frames a track may go unmatched before it ends (paper: 15)."""
+DEFAULT_MAX_DISTANCE_PX = 40.0
+"""Association gate: belt motion is 8–11 px/frame at 30 Hz; neighbouring fillets' centroids are ≥ ~75 px apart."""
+NO_LANE = -1
+
+
+@dataclass(frozen=True)
+class Track:
+    """A snapshot of one tracked fillet after an update."""
+
+    track_id: int
+    blob: Blob
+    """The most recently matched blob (stale while ``unseen`` > 0)."""
+    age: int
+    """Updates since the track opened (1 on the frame it opened)."""
+    unseen: int
+    """Consecutive updates without a match; 0 means ``blob`` is from this frame."""
+    lane: int
+    """Lane from the mean centroid column over the track's matches; -1 without a lane layout."""
+    velocity: tuple[float, float]
+    """Last observed centroid motion in px per frame (u, v)."""
+
+
+@dataclass(frozen=True)
+class TrackUpdate:
+    """What one :meth:`CentroidTracker.update` produced."""
+
+    active: list[Track]
+    """Tracks still alive, sorted by id (including ones unseen this frame)."""
+    ended: list[Track]
+    """Tracks that ended at this update."""
+
+
+class CentroidTracker:
+    """Nearest-centroid multi-object tracker with stable integer ids."""
+
+    def __init__(
+        self,
+        max_distance_px: float = DEFAULT_MAX_DISTANCE_PX,
+        max_unseen: int = DEFAULT_MAX_UNSEEN,
+        lane_layout: LaneLayout | None = None,
+    ) -> None:
+        if not max_distance_px > 0.0:
+            raise ValueError(f"max_distance_px must be > 0, got {max_distance_px}")
+        if max_unseen < 1:
+            raise ValueError(f"max_unseen must be >= 1, got {max_unseen}")
+        self.max_distance_px = float(max_distance_px)
+        self.max_unseen = int(max_unseen)
+        self.lane_layout = lane_layout
+        self._tracks: dict[int, Track] = {}
+        self._sum_u: dict[int, float] = {}
+        self._hits: dict[int, int] = {}
+        self._next_id = 0
+
+    def reset(self) -> None:
+        """Drop every track (ids keep counting up so they are never reused)."""
+        self._tracks.clear()
+        self._sum_u.clear()
+        self._hits.clear()
+
+    def update(self, blobs: Sequence[Blob]) -> TrackUpdate:
+        """Associate this frame's blobs with the tracks; open, age and end tracks."""
+        ids = list(self._tracks)
+        matches = self._associate(ids, blobs)
+        matched_blobs = set(matches.values())
+        ended: list[Track] = []
+        for track_id in ids:
+            track = self._tracks[track_id]
+            if track_id in matches:
+                self._tracks[track_id] = self._matched(track, blobs[matches[track_id]])
+                continue
+            track = replace(track, age=track.age + 1, unseen=track.unseen + 1)
+            if track.unseen >= self.max_unseen:
+                ended.append(track)
+                del self._tracks[track_id], self._sum_u[track_id], self._hits[track_id]
+            else:
+                self._tracks[track_id] = track
+        for index, blob in enumerate(blobs):
+            if index not in matched_blobs:
+                self._open(blob)
+        return TrackUpdate(active=[self._tracks[i] for i in sorted(self._tracks)], ended=ended)
+
+    def _associate(self, ids: list[int], blobs: Sequence[Blob]) -> dict[int, int]:
+        """Track id -> blob index for the minimum-distance assignment within the gate."""
+        if not ids or not blobs:
+            return {}
+        predicted = np.array(
+            [
+                (
+                    t.blob.centroid[0] + t.velocity[0] * (t.unseen + 1),
+                    t.blob.centroid[1] + t.velocity[1] * (t.unseen + 1),
+                )
+                for t in (self._tracks[i] for i in ids)
+            ]
+        )
+        centroids = np.array([b.centroid for b in blobs], dtype=float)
+        distance = np.linalg.norm(predicted[:, None, :] - centroids[None, :, :], axis=2)
+        gated = np.where(distance <= self.max_distance_px, distance, 1e9)
+        rows, cols = linear_sum_assignment(gated)
+        return {ids[r]: int(c) for r, c in zip(rows, cols) if distance[r, c] <= self.max_distance_px}
+
+    def _matched(self, track: Track, blob: Blob) -> Track:
+        frames = track.unseen + 1
+        velocity = (
+            (blob.centroid[0] - track.blob.centroid[0]) / frames,
+            (blob.centroid[1] - track.blob.centroid[1]) / frames,
+        )
+        self._sum_u[track.track_id] += blob.centroid[0]
+        self._hits[track.track_id] += 1
+        return replace(
+            track,
+            blob=blob,
+            age=track.age + 1,
+            unseen=0,
+            lane=self._lane(track.track_id),
+            velocity=velocity,
+        )
+
+    def _open(self, blob: Blob) -> None:
+        track_id = self._next_id
+        self._next_id += 1
+        self._sum_u[track_id] = blob.centroid[0]
+        self._hits[track_id] = 1
+        self._tracks[track_id] = Track(
+            track_id=track_id, blob=blob, age=1, unseen=0, lane=self._lane(track_id), velocity=(0.0, 0.0)
+        )
+
+    def _lane(self, track_id: int) -> int:
+        if self.lane_layout is None:
+            return NO_LANE
+        return self.lane_layout.lane_of_u(self._sum_u[track_id] / self._hits[track_id])
