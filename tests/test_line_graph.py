@@ -101,3 +101,49 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
     assert any(v.side_measured and np.isfinite(v.nmdm) for v in verdicts if v.lane == 1), "no side-view metrics"
     woody = [v for v in verdicts if v.classification == FilletVerdict.CLASS_WOODY]
     assert len(commands) == len(woody) and {c.fillet_id for c in commands} == {v.fillet_id for v in woody}
+
+
+def test_bad_parameters_are_refused_with_the_reason(tmp_path):
+    import subprocess
+
+    from woody_tools.graph import entry_point
+
+    cases = {
+        "line_sim": [("line_speed_fpm", "0.0", "line_speed_fpm"), ("lanes", "7", "lanes"),
+                     ("k_values", "[-1.0]", "k_values"), ("meshes", str(tmp_path / "none"), "none")],
+        "segmenter": [("min_area_px", "0", "min_area_px")],
+        "grader": [("threshold", "-1.0", "threshold"), ("side_lane", "4", "side_lane")],
+        "reject_gate": [("gate_distance_m", "[0.5,0.6]", "gate_distance_m")],
+    }
+    for node, params in cases.items():
+        for name, value, mention in params:
+            result = subprocess.run([entry_point(node), "--ros-args", "-p", f"{name}:={value}"],
+                                    capture_output=True, text=True, timeout=60)
+            lines = [line for line in result.stderr.splitlines() if "pybullet build time" not in line]
+            assert result.returncode == 2, (node, name, result.stderr)
+            assert len(lines) == 1 and mention in lines[0] and "Traceback" not in result.stderr, (node, name, lines)
+
+
+def test_spawn_service_spawns_or_explains(ros_node, ros_domain, tmp_path):
+    from woody_msgs.srv import SpawnFillet
+
+    bad_mesh = tmp_path / "empty.obj"
+    bad_mesh.write_text("")
+    sim = NodeProcess("line_sim", {"realtime": True}, domain_id=ros_domain, log_dir=tmp_path)
+    client = ros_node.create_client(SpawnFillet, "/spawn_fillet")
+    try:
+        assert spin_until(ros_node, client.service_is_ready, timeout=60.0), sim.log_tail()
+        answers = []
+        for request in (SpawnFillet.Request(mesh="seed0001", stiffness=40.0, lane=2),
+                        SpawnFillet.Request(mesh=str(bad_mesh), stiffness=0.0, lane=0),
+                        SpawnFillet.Request(mesh="seed0001", stiffness=-5.0, lane=0),
+                        SpawnFillet.Request(mesh="seed0001", stiffness=0.0, lane=9)):
+            future = client.call_async(request)
+            assert spin_until(ros_node, future.done, timeout=20.0)
+            answers.append(future.result())
+    finally:
+        sim.stop()
+    assert answers[0].success and answers[0].message.startswith("spawned")
+    assert not answers[1].success and "empty.obj" in answers[1].message
+    assert not answers[2].success and "stiffness" in answers[2].message
+    assert not answers[3].success and "lane" in answers[3].message
