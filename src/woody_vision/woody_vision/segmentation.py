@@ -3,8 +3,10 @@
 Pipeline per frame: height map = learned empty-belt depth − depth; mask where the
 height exceeds a few millimetres; morphological opening; connected components;
 and only for components that look like several fillets (low solidity), a
-watershed on the distance transform seeded from its cores, so fillets touching
-in a lane or across lanes come apart. Blobs under ``min_area_px`` are dropped.
+watershed on the distance transform seeded from its cores (or, for fillets
+touching side by side along a long contact, which leave a single core, from the
+two halves of a cut between the contact's end notches), so fillets touching in
+a lane or across lanes come apart. Blobs under ``min_area_px`` are dropped.
 
 Everything per pixel is OpenCV/numpy; the Python loop runs over components
 (a handful per frame) and works on each component's bounding-box ROI.
@@ -129,11 +131,14 @@ def segment_depth(
 
 def segment_height_map(height: np.ndarray, params: SegmentationParams = SegmentationParams()) -> list[Blob]:
     """Split a height map into fillet blobs, sorted by centroid row then column."""
+    if height.size == 0:  # a 0-pixel frame has no fillets (OpenCV would assert on it)
+        return []
     mask = cv2.compare(height, params.height_threshold_m, cv2.CMP_GT)
     if params.open_kernel_px > 1:
         kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (params.open_kernel_px, params.open_kernel_px))
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=cv2.CV_32S)
+    # Grana's block-based labelling: same components, ~3x faster with stats than the default on one thread.
+    count, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, cv2.CV_32S, cv2.CCL_GRANA)
     blobs: list[Blob] = []
     rows, cols = mask.shape
     for label in range(1, count):
@@ -165,15 +170,76 @@ def _split_component(component: np.ndarray, params: SegmentationParams) -> list[
     distance = cv2.distanceTransform(component, cv2.DIST_L2, 5)
     cores = (distance > params.core_ratio * float(distance.max())).astype(np.uint8)
     n_cores, markers = cv2.connectedComponents(cores, connectivity=8, ltype=cv2.CV_32S)
-    if n_cores <= 2:  # background + one core: a single (non-convex) fillet
-        return [component]
-    # Flood the inverted distance transform from the cores; pixels outside the
-    # component carry their own label so the flood cannot leave the fillet mask.
-    outside = n_cores
-    markers[component == 0] = outside
-    relief = cv2.normalize(-distance, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
-    cv2.watershed(cv2.merge([relief, relief, relief]), markers)
-    return [np.where(markers == core, np.uint8(255), np.uint8(0)) for core in range(1, n_cores)]
+    if n_cores <= 2:  # one core: one non-convex fillet, or two side by side along a long contact
+        halves = _cut_between_notches(component, contour, params)
+        if halves is None:
+            return [component]
+        n_cores, markers = 3, halves
+    labels = _flood(distance, markers, component)
+    return [np.where(labels == core, np.uint8(255), np.uint8(0)) for core in range(1, n_cores)]
+
+
+NOTCH_DEPTH_RATIO = 0.1
+"""A concavity counts as the notch between two touching fillets when it is this deep × sqrt(component area)."""
+FLOOD_LEVELS = 6
+"""Immersion steps from the highest unlabelled pixel down to the border (~2 px apart on a fillet)."""
+_KERNEL_3X3 = np.ones((3, 3), np.uint8)
+
+
+def _cut_between_notches(component: np.ndarray, contour: np.ndarray, params: SegmentationParams) -> np.ndarray | None:
+    """Markers 1 and 2 on the two halves of a cut between the component's two deepest notches, or None.
+
+    Fillets touching side by side along their length leave one distance core but
+    a deep notch at each end of the contact; a single fillet has no second deep
+    notch. None when there is no such pair of notches or a half is under ``min_area_px``.
+    """
+    hull = cv2.convexHull(contour, returnPoints=False)
+    defects = cv2.convexityDefects(contour, hull) if len(hull) > 3 else None
+    if defects is None or len(defects) < 2:
+        return None
+    defects = defects.reshape(-1, 4)
+    deepest = defects[np.argsort(defects[:, 3])[-2:]]
+    if deepest[:, 3].min() / 256.0 < NOTCH_DEPTH_RATIO * np.sqrt(cv2.countNonZero(component)):
+        return None
+    cut = component.copy()
+    p1, p2 = (tuple(int(c) for c in contour[i].reshape(2)) for i in deepest[:, 2])
+    cv2.line(cut, p1, p2, 0, 3)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(cut, connectivity=8, ltype=cv2.CV_32S)
+    big = [i for i in range(1, count) if stats[i, cv2.CC_STAT_AREA] >= params.min_area_px]
+    if len(big) != 2:
+        return None
+    markers = np.zeros(component.shape, np.int32)
+    for new_label, old_label in enumerate(big, start=1):
+        markers[labels == old_label] = new_label
+    return markers
+
+
+def _flood(distance: np.ndarray, markers: np.ndarray, component: np.ndarray, levels: int = FLOOD_LEVELS) -> np.ndarray:
+    """Marker-controlled watershed of the inverted distance transform, by immersion in ``levels`` steps.
+
+    Each step admits the unlabelled component pixels at least that far from the
+    border and grows every labelled region into them by 3×3 geodesic dilation,
+    so regions meet along the necks between fillets. (cv2.watershed is not used:
+    it floods by the difference between neighbouring pixels, not by elevation,
+    so on a distance relief it runs along the flat rim and takes the other
+    fillet's border.) Pixels reached by two regions at once go to the higher label.
+    """
+    labels = markers.astype(np.uint8 if int(markers.max()) < 256 else np.uint16)
+    unlabelled = cv2.bitwise_and(component, cv2.compare(labels, 0, cv2.CMP_EQ))
+    if not cv2.countNonZero(unlabelled):
+        return labels
+    top = cv2.minMaxLoc(distance, unlabelled)[1]
+    for level in np.linspace(top, 0.0, levels + 1)[1:]:
+        pending = cv2.bitwise_and(unlabelled, cv2.compare(distance, float(level), cv2.CMP_GE))
+        while cv2.countNonZero(pending):
+            grown = cv2.dilate(labels, _KERNEL_3X3)
+            reached = cv2.bitwise_and(pending, cv2.compare(grown, 0, cv2.CMP_GT))
+            if not cv2.countNonZero(reached):
+                break  # left for a lower level (not connected to any region yet)
+            cv2.copyTo(grown, reached, labels)
+            pending = cv2.subtract(pending, reached)
+        unlabelled = cv2.bitwise_and(unlabelled, cv2.compare(labels, 0, cv2.CMP_EQ))
+    return labels
 
 
 def _largest_contour(mask: np.ndarray) -> np.ndarray:

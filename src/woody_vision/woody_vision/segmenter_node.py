@@ -134,6 +134,7 @@ class Segmenter(Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    cv2.setNumThreads(1)  # per-frame work is small: OpenCV's thread pool costs more than it gains on 2 cores
     sys.exit(run_node("segmenter", Segmenter, args))
 
 

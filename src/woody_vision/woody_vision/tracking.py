@@ -2,7 +2,9 @@
 
 Blobs are matched to tracks with a minimum-total-distance assignment
 (``scipy.optimize.linear_sum_assignment``) between each track's predicted
-centroid and the blob centroids, gated by ``max_distance_px``. The prediction
+centroid and the blob centroids, gated by ``max_distance_px``; within the gate
+a track seen more recently is preferred over a staler one (each frame unseen
+costs 2 × the gate in the assignment), like a matching cascade. The prediction
 is the last centroid plus the last observed per-frame motion, so a track that
 missed a few frames is still found downstream. Unmatched blobs open tracks with
 new, never reused integer ids; a track ends once it has gone ``max_unseen``
@@ -118,7 +120,11 @@ class CentroidTracker:
         )
         centroids = np.array([b.centroid for b in blobs], dtype=float)
         distance = np.linalg.norm(predicted[:, None, :] - centroids[None, :, :], axis=2)
-        gated = np.where(distance <= self.max_distance_px, distance, 1e9)
+        # Recently seen tracks come first: a stale track's extrapolated ghost (e.g. of a fillet that fell off
+        # the edge moving backwards in the image) must not take the blob of the live track right behind it.
+        unseen = np.array([self._tracks[i].unseen for i in ids], dtype=float)
+        stale_penalty = 2.0 * self.max_distance_px * unseen[:, None]
+        gated = np.where(distance <= self.max_distance_px, distance + stale_penalty, 1e9)
         rows, cols = linear_sum_assignment(gated)
         return {ids[r]: int(c) for r, c in zip(rows, cols) if distance[r, c] <= self.max_distance_px}
 

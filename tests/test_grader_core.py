@@ -1,0 +1,214 @@
+"""FilletGrader: one verdict per fillet, and the watched lane's verdict paired with its side-view passage."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from woody_vision.grader_core import SIDE_MATCH_SLACK_S, FilletGrader, GradedFillet, TrackObservation
+from woody_vision.grading import GradingRules
+from woody_vision.shape_score import REASON_LOST_IN_WINDOW, STATUS_SCORED
+from woody_vision.side_view import SideMeasurement
+from woody_vision.synthetic import teardrop_polygon
+
+EDGE = 200.0
+FPS = 30.0
+WAIT = 0.8
+WATCHED = 1
+
+
+def contours(frames: int = 90, start_tip_v: float = 120.0, step: float = 3.0, bend: float = 1.0) -> list[np.ndarray]:
+    """A teardrop moving down through the edge row; ``bend`` < 1 shortens the part beyond the edge (flexible)."""
+    out = []
+    for i in range(frames):
+        p = teardrop_polygon((300.0, start_tip_v + i * step - 55.0), 110.0, 60.0)
+        over = p[:, 1] > EDGE
+        p[over, 1] = EDGE + (p[over, 1] - EDGE) * bend
+        out.append(np.round(p).astype(np.int32))
+    return out
+
+
+def side(first: float, last: float, nmdm: float = 0.5) -> SideMeasurement:
+    return SideMeasurement(nmdm=nmdm, mdm_min_px=30.0, be=20.0, h_px=12.0, stamp_of_min=(first + last) / 2,
+                           first_stamp=first, last_stamp=last, frames=10)
+
+
+def feed(grader: FilletGrader, track_id: int, lane: int, shapes, t0: float = 0.0, end: bool = False,
+         extra_after: int = 0) -> list[tuple[float, GradedFillet]]:
+    """Feed one track frame by frame; returns (stamp, verdict) for every verdict that came out."""
+    out = []
+    stamp = t0
+    for i, contour in enumerate(shapes):
+        stamp = t0 + i / FPS
+        out += [(stamp, g) for g in grader.on_tracks(stamp, [TrackObservation(track_id, lane, contour)])]
+    for j in range(extra_after):  # stale frames of the same track (unseen) and empty frames
+        stamp += 1 / FPS
+        out += [(stamp, g) for g in grader.on_tracks(stamp, [TrackObservation(track_id, lane, shapes[-1], unseen=j + 1)])]
+    if end:
+        stamp += 1 / FPS
+        out += [(stamp, g) for g in grader.on_tracks(stamp, [], ended_ids=[track_id])]
+    return out
+
+
+def closing_stamp(shapes, t0: float = 0.0) -> float:
+    grader = FilletGrader(EDGE)
+    ((stamp, verdict),) = feed(grader, 0, 0, shapes, t0)
+    return verdict.shape.stamp
+
+
+def through_close(shapes, extra: int = 3) -> list[np.ndarray]:
+    """The frames up to the one that closes the window, plus ``extra`` more (well within the side wait)."""
+    return shapes[: int(round(closing_stamp(shapes) * FPS)) + 1 + extra]
+
+
+def test_one_verdict_per_track_even_with_frames_after_the_window_closed():
+    grader = FilletGrader(EDGE, GradingRules(threshold=1.0))
+    shapes = contours(120)  # keeps coming long after the window closed
+    out = feed(grader, 7, 0, shapes, end=True, extra_after=5)
+    assert len(out) == 1
+    stamp, verdict = out[0]
+    assert verdict.fillet_id == 7 and verdict.lane == 0 and verdict.scored and verdict.side is None
+    assert verdict.shape.status == STATUS_SCORED and stamp == verdict.shape.stamp < 90 / FPS
+    assert verdict.label == "woody" and verdict.shape.phi < 1e-6  # unchanged outline: stiff
+    assert grader.release(1e9) == []
+
+
+def test_classification_follows_the_rules():
+    rules = GradingRules(threshold=1.0, moderate_threshold=3.0, severe_threshold=0.5)
+    grader = FilletGrader(EDGE, rules)
+    ((_, flexible),) = feed(grader, 1, 0, contours(90, bend=0.4))
+    ((_, stiff),) = feed(grader, 2, 2, contours(90))
+    assert flexible.shape.phi > 1.0 and flexible.label == "normal"
+    assert flexible.grade == rules.grade(flexible.shape.phi)
+    assert stiff.label == "woody" and stiff.grade == "severe"
+    assert FilletGrader(EDGE).on_tracks(0.0, []) == []
+
+
+def test_unscored_verdict_when_the_track_ends_in_the_window():
+    grader = FilletGrader(EDGE, watched_lane=WATCHED)
+    shapes = contours(90)
+    opens = next(i for i, c in enumerate(shapes) if c[:, 1].max() >= EDGE - 2.0)
+    out = feed(grader, 3, WATCHED, shapes[: opens + 2], end=True)
+    ((_, verdict),) = out  # unscored watched-lane verdicts are not held for the side view
+    assert verdict.label == "unscored" and verdict.grade == "" and not verdict.scored
+    assert verdict.shape.reason == REASON_LOST_IN_WINDOW and verdict.lane == WATCHED
+    assert grader.release(1e9) == []
+
+
+def test_unseen_observations_do_not_feed_the_evaluator():
+    grader = FilletGrader(EDGE)
+    shapes = contours(90)
+    past_edge = contours(1, start_tip_v=EDGE + 40.0)[0]
+    assert grader.on_tracks(0.0, [TrackObservation(4, 0, shapes[0])]) == []
+    assert grader.on_tracks(0.03, [TrackObservation(4, 0, past_edge, unseen=1)]) == []
+    out = feed(grader, 4, 0, shapes[1:], t0=0.07)
+    ((_, verdict),) = out
+    assert verdict.scored and verdict.shape.phi < 1e-6
+
+
+def test_watched_lane_verdict_waits_for_its_side_measurement():
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    shapes = contours(120)
+    close = closing_stamp(shapes)
+    held = feed(grader, 5, WATCHED, through_close(shapes, extra=10))
+    assert held == [], "held until the side passage ends"
+    assert grader.release(close + 0.5 * WAIT) == []
+    released = grader.on_side(side(close - 0.1, close + 0.3, nmdm=0.42))
+    assert len(released) == 1
+    verdict = released[0]
+    assert verdict.fillet_id == 5 and verdict.side is not None and verdict.side.nmdm == 0.42
+    assert verdict.shape.stamp == pytest.approx(close)
+    # no second verdict: not when the wait runs out, nor when the track ends
+    assert grader.release(close + 10 * WAIT) == []
+    assert grader.on_tracks(close + 11 * WAIT, [], ended_ids=[5]) == []
+
+
+def test_watched_lane_verdict_released_after_side_wait_without_a_measurement():
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    shapes = contours(90)
+    close = closing_stamp(shapes)
+    assert feed(grader, 6, WATCHED, through_close(shapes)) == []
+    assert grader.release(close + WAIT - 0.01) == []
+    released = grader.release(close + WAIT)
+    assert len(released) == 1 and released[0].fillet_id == 6 and released[0].side is None
+    assert grader.release(close + 2 * WAIT) == []
+
+
+def test_released_by_later_top_frames_too():
+    """The grader's own frames advance its clock: a held verdict comes out with the first frame past the wait."""
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    shapes = contours(90)
+    close = closing_stamp(shapes)
+    out = feed(grader, 8, WATCHED, shapes + [shapes[-1]] * 40)
+    ((stamp, verdict),) = out
+    assert verdict.fillet_id == 8 and verdict.side is None
+    assert close + WAIT <= stamp < close + WAIT + 1.5 / FPS
+
+
+def test_side_measurement_that_arrived_first_is_paired_at_once():
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    shapes = contours(90)
+    close = closing_stamp(shapes)
+    assert grader.on_side(side(close - 0.4, close - 0.1)) == []  # within the slack before the closing frame
+    out = feed(grader, 9, WATCHED, through_close(shapes))
+    ((stamp, verdict),) = out
+    assert stamp == pytest.approx(close) and verdict.side is not None
+
+
+def test_side_measurement_of_another_time_is_not_attached():
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    shapes = contours(90)
+    t0 = 5.0
+    close = closing_stamp(shapes, t0)
+    assert feed(grader, 10, WATCHED, through_close(shapes), t0=t0) == []
+    assert grader.on_side(side(close - 3.0, close - 2.0)) == []
+    assert grader.on_side(side(close + SIDE_MATCH_SLACK_S + 0.05, close + 0.6)) == []
+    (verdict,) = grader.release(close + WAIT)
+    assert verdict.side is None
+
+
+def test_two_watched_fillets_each_get_their_own_side_measurement():
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    shapes = contours(90)
+    close_a = closing_stamp(shapes, 0.0)
+    close_b = closing_stamp(shapes, 1.0)
+    assert feed(grader, 11, WATCHED, through_close(shapes), t0=0.0) == []
+    later = side(close_b - 0.1, close_b + 0.2, nmdm=0.8)
+    assert grader.on_side(later) == [], "B's passage does not overlap A's window"
+    (a,) = grader.on_side(side(close_a - 0.1, close_a + 0.2, nmdm=0.4))
+    assert a.fillet_id == 11 and a.side.nmdm == 0.4
+    out = feed(grader, 12, WATCHED, through_close(shapes), t0=1.0)
+    ((_, b),) = out
+    assert b.fillet_id == 12 and b.side is later
+
+
+def test_other_lanes_and_no_watched_lane_are_immediate():
+    for watched in (None, WATCHED):
+        grader = FilletGrader(EDGE, watched_lane=watched)
+        lane = 0 if watched is not None else WATCHED
+        shapes = contours(90)
+        out = feed(grader, 13, lane, shapes)
+        ((stamp, verdict),) = out
+        assert stamp == pytest.approx(verdict.shape.stamp) and verdict.side is None
+
+
+def test_many_tracks_in_one_frame_each_get_one_verdict():
+    grader = FilletGrader(EDGE, watched_lane=None)
+    shapes = contours(90)
+    verdicts = []
+    for i, contour in enumerate(shapes):
+        tracks = [TrackObservation(tid, tid % 3, contour + np.array([120 * tid, 0], np.int32)) for tid in range(5)]
+        verdicts += grader.on_tracks(i / FPS, tracks)
+    verdicts += grader.on_tracks(len(shapes) / FPS, [], ended_ids=range(5))
+    assert sorted(v.fillet_id for v in verdicts) == [0, 1, 2, 3, 4]
+    assert [v.lane for v in sorted(verdicts, key=lambda v: v.fillet_id)] == [0, 1, 2, 0, 1]
+
+
+def test_grader_validates_its_options():
+    with pytest.raises(ValueError):
+        FilletGrader(EDGE, side_wait_s=-0.1)
+    with pytest.raises(ValueError):
+        FilletGrader(EDGE, evaluator_options={"tip_ratio": 2.0})
+    assert math.isinf(FilletGrader(EDGE).now)

@@ -1,0 +1,190 @@
+"""Side-view bending metrics on synthetic frames with known geometry: MDM, NMDM, thinning, BE, passages."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from woody_vision.side_view import (
+    SidePassageTracker,
+    bending_energy,
+    mdm,
+    nmdm,
+    silhouette,
+    zhang_suen_thinning,
+)
+from woody_vision.synthetic import FILLET_RGB, SideScene, SideStrip
+
+SCENE = SideScene()
+AXLE = SCENE.axle_uv
+R = SCENE.roller_radius_px
+DT = 1.0 / 200.0
+
+
+def with_disc(centre: tuple[float, float], radius: float) -> np.ndarray:
+    """The side background with a fillet-coloured disc drawn at a sub-pixel centre."""
+    rgb = SCENE.background()
+    shift = 4
+    cv2.circle(rgb, (round(centre[0] * 16), round(centre[1] * 16)), round(radius * 16), FILLET_RGB, -1, cv2.LINE_8,
+               shift)
+    return rgb
+
+
+def flush(tracker: SidePassageTracker, stamp: float, frames: int = 4) -> list:
+    """Empty frames after the last fillet left, so its passage ends."""
+    out = []
+    for j in range(frames):
+        out += tracker.update(SCENE.background(), stamp + j * DT)
+    return out
+
+
+def test_mdm_and_nmdm_arithmetic():
+    assert mdm((3.0, 4.0), (0.0, 0.0)) == pytest.approx(5.0)
+    assert mdm(AXLE, AXLE) == 0.0
+    assert nmdm(60.0, 48.0, 12.0) == pytest.approx(1.0)
+    assert nmdm(40.0, 48.0, 12.0) == pytest.approx(40.0 / 60.0)
+
+
+def test_disc_silhouette_centroid_and_mdm():
+    centre = (530.3, 251.7)
+    mask = silhouette(with_disc(centre, 20.0), SCENE.background())
+    m = cv2.moments(mask, binaryImage=True)
+    assert (m["m10"] / m["m00"], m["m01"] / m["m00"]) == pytest.approx(centre, abs=0.3)
+    assert m["m00"] == pytest.approx(math.pi * 20.5**2, rel=0.02)  # drawn pixels include the rim
+    assert mdm((m["m10"] / m["m00"], m["m01"] / m["m00"]), AXLE) == pytest.approx(math.dist(centre, AXLE), abs=0.3)
+
+
+def test_passage_of_a_disc_gives_known_min_mdm_h_and_nmdm():
+    """A disc of radius r rolls along the belt (h = r), then circles the axle at distance D: NMDM = D / (R + r)."""
+    r = 20.0
+    closest = 0.8 * (R + r)
+    tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
+    frames: list[tuple[float, float]] = [(u, AXLE[1] - R - r) for u in np.arange(150.0, 400.0, 25.0)]
+    frames += [(AXLE[0] + closest * math.sin(a), AXLE[1] - closest * math.cos(a))
+               for a in np.radians(np.arange(-70.0, 71.0, 10.0))]
+    out = []
+    for i, centre in enumerate(frames):
+        out += tracker.update(with_disc(centre, r), i * DT)
+        assert out == [], "no measurement while the passage is still in view"
+    out += flush(tracker, len(frames) * DT)
+    (m,) = out
+    assert m.h_px == pytest.approx(r, abs=1.0)
+    assert m.mdm_min_px == pytest.approx(closest, abs=0.5)
+    assert m.nmdm == pytest.approx(closest / (R + r), abs=0.015)
+    assert m.frames == len(frames) and m.first_stamp == 0.0 and m.last_stamp == pytest.approx((len(frames) - 1) * DT)
+    assert m.stamp_of_min == pytest.approx((len(frames) - 1 - 7) * DT)  # the frame at the top of the roller
+
+
+def test_a_fillet_never_seen_flat_gives_no_measurement():
+    tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
+    for i, a in enumerate(np.radians([10.0, 30.0, 50.0])):
+        tracker.update(with_disc((AXLE[0] + 70 * math.sin(a), AXLE[1] - 70 * math.cos(a)), 20.0), i * DT)
+    assert flush(tracker, 1.0) == []
+
+
+def strip_passage(tracker: SidePassageTracker, drape: bool, leads, t0: float = 0.0, behind: float | None = None):
+    out = []
+    for i, lead in enumerate(leads):
+        strips = [SideStrip(lead_px=float(lead), drape=drape)]
+        if behind is not None:
+            strips.append(SideStrip(lead_px=float(lead) - behind, drape=drape))
+        out += tracker.update(SCENE.render(strips), t0 + i * DT)
+    return out
+
+
+def test_draping_strip_has_lower_nmdm_than_a_rigid_one():
+    leads = np.arange(-300.0, 161.0, 20.0)
+    results = {}
+    for drape in (True, False):
+        tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
+        out = strip_passage(tracker, drape, leads)
+        assert out == []
+        (results[drape],) = flush(tracker, len(leads) * DT)
+    rigid, draping = results[False], results[True]
+    thickness = SideStrip(0.0).thickness_px
+    assert rigid.h_px == pytest.approx(thickness / 2, abs=1.0) and draping.h_px == pytest.approx(thickness / 2, abs=1.0)
+    assert rigid.nmdm == pytest.approx(1.0, abs=0.03)  # a cantilever's centroid passes the roller top at R + t/2
+    assert draping.nmdm < rigid.nmdm - 0.2
+    assert draping.mdm_min_px < R + thickness / 2 - 10.0
+    assert rigid.be < 1e-6
+
+
+def test_one_measurement_per_passage_with_two_fillets_in_view():
+    tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
+    leads = np.arange(-200.0, 161.0, 20.0)
+    behind = 420.0
+    out = strip_passage(tracker, True, leads, behind=behind)  # the second strip follows 420 px behind
+    assert out == []
+    # the first strip falls away; the second goes on over the roller
+    rest = leads[-1] - behind + np.arange(20.0, 20.0 * 40, 20.0)
+    rest = rest[rest <= 160.0]
+    t1 = len(leads) * DT
+    out = strip_passage(tracker, True, rest, t0=t1)
+    assert len(out) == 1, "the first passage ends once, while the second is still in view"
+    first = out[0]
+    assert first.first_stamp == 0.0 and first.last_stamp == pytest.approx((len(leads) - 1) * DT)
+    out = flush(tracker, t1 + len(rest) * DT)
+    assert len(out) == 1
+    second = out[0]
+    assert second.first_stamp > 0.0 and second.last_stamp == pytest.approx(t1 + (len(rest) - 1) * DT)
+    assert second.nmdm == pytest.approx(first.nmdm, abs=0.05)
+    assert flush(tracker, 10.0) == []
+
+
+def test_tracker_learns_the_background_from_its_first_frame_and_relearns_on_a_new_size():
+    tracker = SidePassageTracker(AXLE, R)
+    assert tracker.update(SCENE.background(), 0.0) == []
+    out = []
+    for i, u in enumerate(np.arange(150.0, 400.0, 50.0)):
+        out += tracker.update(with_disc((u, AXLE[1] - R - 20.0), 20.0), (i + 1) * DT)
+    assert tracker.update(np.zeros((10, 10, 3), np.uint8), 1.0) == []  # a new size: relearn, drop passages
+    assert tracker.background.shape == (10, 10, 3)
+    tracker.reset()
+    assert tracker.background is None
+    with pytest.raises(ValueError):
+        SidePassageTracker(AXLE, 0.0)
+    with pytest.raises(ValueError):
+        SidePassageTracker(AXLE, R, end_frames=0)
+
+
+# --------------------------------------------------------------- skeleton and BE
+
+
+def strip_mask(curvature: float, thickness: int = 14, shape=(220, 320)) -> np.ndarray:
+    """A thick parabola y = 60 + curvature·(x − 160)² from x = 30 to 290 (curvature 0: a straight bar)."""
+    mask = np.zeros(shape, np.uint8)
+    xs = np.arange(30, 291)
+    ys = 60.0 + curvature * (xs - 160.0) ** 2
+    cv2.polylines(mask, [np.round(np.stack([xs, ys], 1)).astype(np.int32).reshape(-1, 1, 2)], False, 255, thickness)
+    return mask
+
+
+def test_thinning_gives_a_one_pixel_connected_skeleton_inside_the_mask():
+    for mask in (strip_mask(0.0), strip_mask(0.005)):
+        skeleton = zhang_suen_thinning(mask)
+        assert skeleton.any() and not (skeleton & (mask == 0)).any()
+        blocks = skeleton[:-1, :-1] & skeleton[1:, :-1] & skeleton[:-1, 1:] & skeleton[1:, 1:]
+        assert not blocks.any(), "no 2x2 block survives thinning"
+        count, _ = cv2.connectedComponents(skeleton.astype(np.uint8), connectivity=8)
+        assert count == 2
+    bar = zhang_suen_thinning(strip_mask(0.0))
+    ys, xs = np.nonzero(bar)
+    assert np.ptp(xs) > 230 and np.ptp(ys) <= 2
+    assert zhang_suen_thinning(np.zeros((5, 5), np.uint8)).sum() == 0
+
+
+def test_bending_energy_zero_for_straight_and_growing_with_curvature():
+    assert bending_energy(strip_mask(0.0)) < 1e-6
+    line = np.zeros((50, 200), np.uint8)
+    line[25, 10:190] = 255
+    assert bending_energy(line) < 1e-6
+    energies = [bending_energy(strip_mask(c)) for c in (0.002, 0.005, 0.01)]
+    assert energies[0] > 1.0
+    assert all(b > 1.5 * a for a, b in zip(energies, energies[1:])), energies
+    assert math.isnan(bending_energy(np.zeros((20, 20), np.uint8)))
+    column = np.zeros((60, 20), np.uint8)
+    column[5:55, 10] = 255  # a vertical skeleton: y(x) cannot be fitted
+    assert math.isnan(bending_energy(column))

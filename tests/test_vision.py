@@ -1,0 +1,672 @@
+"""Top-down vision on synthetic frames with known geometry: segmentation, tracking, Φ, frame checks, grading rules.
+
+Frames come from woody_vision.synthetic (a nadir pinhole camera over the belt
+end); where a test needs a shape whose width profile or bending is known
+analytically, it draws the polygon itself.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import cv2
+import numpy as np
+import pytest
+
+from woody_vision.camera_model import LaneLayout, lane_center_u
+from woody_vision.frame_checks import RESIZE_CONFIRM_FRAMES, FrameChecker, FrameError, image_to_array
+from woody_vision.grading import GradingRules
+from woody_vision.segmentation import Blob, BackgroundModel, SegmentationParams, height_map, segment_depth
+from woody_vision.shape_score import (
+    REASON_LOST_BEFORE_EDGE,
+    REASON_LOST_IN_WINDOW,
+    REASON_STARTED_PAST_EDGE,
+    STATUS_SCORED,
+    STATUS_UNSCORED,
+    ShapeEvaluator,
+    ShapeScorer,
+    aspect_ratio,
+    cut_tip,
+    make_reference,
+    shape_terms,
+    solidity,
+)
+from woody_vision.synthetic import (
+    DEFAULT_CAMERA_HEIGHT_M,
+    DEFAULT_TOP_K,
+    TopFillet,
+    TopScene,
+    teardrop_half_widths,
+    teardrop_polygon,
+)
+from woody_vision.tracking import CentroidTracker, TrackUpdate
+
+FPS = 30.0
+LAYOUT3 = LaneLayout(DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 3, 0.16)
+
+
+# ----------------------------------------------------------------- helpers
+
+
+def segment(fillets, t: float = 0.0, params: SegmentationParams = SegmentationParams()) -> list[Blob]:
+    scene = TopScene(fillets)
+    return segment_depth(scene.render(t)[1], scene.background_depth(), params)
+
+
+def mask_components(fillets, t: float = 0.0) -> int:
+    """Connected components of the thresholded, opened mask: >1 fillet per component means they touch."""
+    scene = TopScene(fillets)
+    height = height_map(scene.render(t)[1], scene.background_depth())
+    mask = cv2.morphologyEx((height > 0.005).astype(np.uint8), cv2.MORPH_OPEN,
+                            cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+    count, _, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    return sum(1 for i in range(1, count) if stats[i, cv2.CC_STAT_AREA] >= 500)
+
+
+def fillet_masks(fillets, t: float) -> list[np.ndarray]:
+    """Each fillet rendered alone: its own pixel mask (the ground truth for matching blobs)."""
+    out = []
+    for fillet in fillets:
+        scene = TopScene([fillet])
+        out.append((scene.background_depth() - scene.render(t)[1]) > 0.005)
+    return out
+
+
+def owner(blob: Blob, masks: list[np.ndarray]) -> int:
+    """Index of the fillet whose own pixels cover most of the blob (-1 if none covers half of it)."""
+    filled = np.zeros(masks[0].shape, np.uint8)
+    cv2.fillPoly(filled, [blob.contour.reshape(-1, 1, 2)], 1)
+    overlaps = [int(np.count_nonzero(filled.astype(bool) & m)) for m in masks]
+    best = int(np.argmax(overlaps))
+    return best if overlaps[best] >= 0.5 * blob.area_px else -1
+
+
+def square_blob(u: float, v: float, half: int = 15) -> Blob:
+    contour = np.array([[u - half, v - half], [u + half, v - half], [u + half, v + half], [u - half, v + half]],
+                       np.int32)
+    return Blob(contour=contour, centroid=(float(u), float(v)), area_px=(2 * half) ** 2,
+                bbox=(int(u - half), int(v - half), 2 * half, 2 * half), mean_height_m=0.02)
+
+
+def polygon_contour(points: np.ndarray) -> np.ndarray:
+    return np.round(np.asarray(points, float)).astype(np.int32)
+
+
+def moments_centroid_v(contour: np.ndarray) -> float:
+    m = cv2.moments(contour)
+    return m["m01"] / m["m00"]
+
+
+# ------------------------------------------------------------ segmentation
+
+L, W = 0.19, 0.095
+
+
+@pytest.mark.parametrize("overlap_m", [0.005, 0.01])
+@pytest.mark.parametrize("lead_m", [-0.2, 0.0])
+def test_tip_to_tail_touching_fillets_split_at_their_contact(overlap_m, lead_m):
+    """A follower touching its leader in the same lane: two blobs, each matching the fillet drawn alone."""
+    fillets = [TopFillet(lead_m=lead_m, across_m=0.0), TopFillet(lead_m=lead_m - L + overlap_m, across_m=0.0)]
+    t = 0.1 if lead_m == 0.0 else 0.0
+    assert mask_components(fillets, t) == 1, "precondition: the two fillets form one connected component"
+    blobs = segment(fillets, t)
+    singles = [segment([f], t)[0] for f in fillets]
+    assert len(blobs) == 2
+    for single in singles:
+        match = min(blobs, key=lambda b: math.dist(b.centroid, single.centroid))
+        assert math.dist(match.centroid, single.centroid) < 1.5
+        assert abs(match.area_px - single.area_px) < 0.03 * single.area_px
+
+
+@pytest.mark.parametrize("overlap_m,stagger_m", [(0.0, 0.0), (0.004, 0.0), (0.008, 0.01), (0.002, 0.03)])
+def test_side_by_side_fillets_across_lanes_split_into_two_blobs_and_tracks(overlap_m, stagger_m):
+    """Neighbours in two lanes touching along their length (one distance core, two end notches)."""
+    pitch = W - overlap_m
+    layout = LaneLayout(DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 2, pitch)
+    fillets = [TopFillet(lead_m=-0.25, across_m=pitch / 2), TopFillet(lead_m=-0.25 - stagger_m, across_m=-pitch / 2)]
+    assert mask_components(fillets) == 1, "precondition: the two fillets form one connected component"
+    singles = [segment([f])[0] for f in fillets]
+    blobs = segment(fillets)
+    assert len(blobs) == 2
+    for single in singles:
+        match = min(blobs, key=lambda b: math.dist(b.centroid, single.centroid))
+        assert math.dist(match.centroid, single.centroid) < 2.0
+        assert abs(match.area_px - single.area_px) < 0.06 * single.area_px
+
+    tracker = CentroidTracker(lane_layout=layout)
+    scene = TopScene(fillets)
+    ids_per_lane: dict[int, set[int]] = {0: set(), 1: set()}
+    for i in range(8):
+        update = tracker.update(segment_depth(scene.render(i / FPS)[1], scene.background_depth()))
+        assert len(update.active) == 2 and not update.ended
+        for track in update.active:
+            ids_per_lane[track.lane].add(track.track_id)
+    assert ids_per_lane == {0: {0}, 1: {1}} or ids_per_lane == {0: {1}, 1: {0}}
+
+
+def test_single_fillets_are_never_split_while_crossing_the_edge():
+    rng = np.random.default_rng(4)
+    for _ in range(8):
+        fillet = TopFillet(lead_m=-0.15, across_m=rng.uniform(-0.3, 0.3), length_m=rng.uniform(0.17, 0.22),
+                           width_m=rng.uniform(0.08, 0.11), thickness_m=rng.uniform(0.02, 0.035),
+                           curvature_per_m=rng.uniform(0.0, 16.0), tip_rate_per_m=rng.uniform(6.0, 20.0))
+        scene = TopScene([fillet])
+        for i in range(0, 36, 3):
+            assert len(segment_depth(scene.render(i / FPS)[1], scene.background_depth())) <= 1
+
+
+def test_blob_geometry_matches_the_drawn_fillet():
+    scene = TopScene([TopFillet(lead_m=-0.2, across_m=0.05)])
+    (blob,) = segment_depth(scene.render(0.0)[1], scene.background_depth())
+    intr = scene.intrinsics
+    expected_u = intr.cx + intr.fx * 0.05 / (DEFAULT_CAMERA_HEIGHT_M - 0.02)
+    assert blob.centroid[0] == pytest.approx(expected_u, abs=1.0)
+    u, v, w, h = blob.bbox
+    assert (blob.contour[:, 0].min(), blob.contour[:, 1].min()) == (u, v)
+    assert (blob.contour[:, 0].max(), blob.contour[:, 1].max()) == (u + w - 1, v + h - 1)
+    assert 0.005 < blob.mean_height_m < 0.03
+
+
+def test_small_specks_are_dropped():
+    background = np.full((120, 160), 0.75, np.float32)
+    depth = background.copy()
+    depth[10:30, 10:30] = 0.72  # 400 px: below the 500 px minimum
+    depth[50:100, 50:110] = 0.72  # 3000 px: kept
+    blobs = segment_depth(depth, background)
+    assert len(blobs) == 1 and blobs[0].area_px == pytest.approx(3000, abs=10)  # opening rounds the corners
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
+def test_non_finite_depth_gives_no_blobs(value):
+    background = TopScene([]).background_depth()
+    assert segment_depth(np.full_like(background, value), background) == []
+    depth = background.copy()
+    depth[100:160, 200:300] = value  # a patch of bad returns is not a fillet
+    assert segment_depth(depth, background) == []
+
+
+def test_non_finite_pixels_inside_a_fillet_do_not_poison_it():
+    background = np.full((200, 200), 0.75, np.float32)
+    background[:5] = np.nan  # never-measured background pixels never rise
+    depth = background.copy()
+    depth[50:150, 50:150] = 0.72
+    depth[90:95, 90:95] = np.nan
+    depth[0:3, 0:100] = 0.1
+    (blob,) = segment_depth(depth, background)
+    assert blob.area_px == pytest.approx(100 * 100 - 25, abs=20)
+    assert blob.mean_height_m == pytest.approx(0.03, abs=1e-6)
+
+
+def test_empty_frames_give_no_blobs():
+    background = TopScene([]).background_depth()
+    assert segment_depth(background.copy(), background) == []
+    empty = np.zeros((0, 0), np.float32)
+    assert segment_depth(empty, empty) == []
+    assert segment_depth(np.zeros((0, 672), np.float32), np.zeros((0, 672), np.float32)) == []
+
+
+def test_background_model_ignores_missing_returns():
+    model = BackgroundModel(frames_needed=3)
+    a = np.full((4, 4), 0.75, np.float32)
+    b = a.copy()
+    b[0, 0] = np.nan
+    c = a.copy()
+    c[0, 0] = np.inf
+    c[1, 1] = np.nan
+    assert not model.add(a) and not model.add(b)
+    with pytest.raises(RuntimeError):
+        _ = model.depth
+    assert model.add(c)
+    assert np.allclose(model.depth, 0.75)
+    never = BackgroundModel(1)
+    never.add(np.full((2, 2), np.nan, np.float32))
+    assert np.isnan(never.depth).all()
+    assert segment_depth(np.full((2, 2), 0.1, np.float32), never.depth) == []
+    with pytest.raises(ValueError):
+        BackgroundModel(0)
+    model2 = BackgroundModel(2)
+    model2.add(a)
+    with pytest.raises(ValueError):
+        model2.add(np.zeros((3, 3), np.float32))
+    model.reset()
+    assert not model.ready
+
+
+def test_segmentation_params_are_validated():
+    for bad in (dict(height_threshold_m=0.0), dict(min_area_px=0), dict(open_kernel_px=-1),
+                dict(split_solidity=1.5), dict(core_ratio=1.0)):
+        with pytest.raises(ValueError):
+            SegmentationParams(**bad)
+
+
+# ---------------------------------------------------------------- tracking
+
+
+def test_ids_stable_and_lanes_right_over_50_frames_of_several_fillets():
+    """9 fillets in 3 lanes (one touching pair) pass the view: one id per fillet for its whole passage."""
+    across = {0: 0.16, 1: 0.0, 2: -0.16}
+    leads = {0: [-0.05, -0.33, -0.62], 1: [-0.15, -0.15 - L + 0.005, -0.64], 2: [0.02, -0.30, -0.60]}
+    fillets, lanes = [], []
+    for lane, lane_leads in leads.items():
+        for k, lead in enumerate(lane_leads):
+            fillets.append(TopFillet(lead_m=lead, across_m=across[lane], curvature_per_m=3.0 + 5.0 * k))
+            lanes.append(lane)
+    scene = TopScene(fillets)
+    background = scene.background_depth()
+    tracker = CentroidTracker(lane_layout=LAYOUT3)
+    ids_of_fillet: dict[int, set[int]] = {}
+    fillets_of_id: dict[int, set[int]] = {}
+    seen_frames: dict[int, int] = {}
+    visible_frames: dict[int, int] = {}
+    ended: list[int] = []
+    for i in range(50):
+        t = i / FPS
+        blobs = segment_depth(scene.render(t)[1], background)
+        update = tracker.update(blobs)
+        ended += [track.track_id for track in update.ended]
+        masks = fillet_masks(fillets, t)
+        for k, m in enumerate(masks):
+            if np.count_nonzero(m) >= 1500:
+                visible_frames[k] = visible_frames.get(k, 0) + 1
+        by_blob = {id(track.blob): track for track in update.active if track.unseen == 0}
+        assert len(by_blob) == len(blobs), "every blob of this frame belongs to a track seen now"
+        for blob in blobs:
+            track = by_blob[id(blob)]
+            k = owner(blob, masks)
+            assert k >= 0, f"frame {i}: blob at {blob.centroid} is not mostly one fillet"
+            ids_of_fillet.setdefault(k, set()).add(track.track_id)
+            fillets_of_id.setdefault(track.track_id, set()).add(k)
+            seen_frames[k] = seen_frames.get(k, 0) + 1
+            assert track.lane == lanes[k], f"fillet {k} in lane {lanes[k]} tracked in lane {track.lane}"
+    assert set(ids_of_fillet) == set(range(len(fillets))), "every fillet was segmented at some point"
+    assert all(len(ids) == 1 for ids in ids_of_fillet.values()), ids_of_fillet
+    assert all(len(ks) == 1 for ks in fillets_of_id.values()), fillets_of_id
+    for k, frames in visible_frames.items():
+        assert seen_frames.get(k, 0) >= 0.9 * frames, f"fillet {k} segmented in too few of its frames"
+    # the three leaders fell past the edge long enough ago that their tracks ended, once each
+    leaders = [next(iter(ids_of_fillet[k])) for k in (0, 3, 6)]
+    assert sorted(set(ended) & set(leaders)) == sorted(leaders) and len(ended) == len(set(ended))
+
+
+def test_track_ends_after_max_unseen_frames_exactly_once():
+    tracker = CentroidTracker(max_unseen=5)
+    for v in (100, 110, 120):
+        update = tracker.update([square_blob(300, v)])
+    (track,) = update.active
+    for missed in range(1, 5):
+        update = tracker.update([])
+        assert [t.unseen for t in update.active] == [missed] and not update.ended
+        assert update.active[0].blob.centroid == (300.0, 120.0)  # stale blob kept
+    update = tracker.update([])
+    assert update.active == [] and [t.track_id for t in update.ended] == [track.track_id]
+    assert update.ended[0].unseen == 5
+    assert tracker.update([]) == TrackUpdate(active=[], ended=[])
+
+
+def test_new_blobs_open_new_tracks_and_ids_are_never_reused():
+    tracker = CentroidTracker(max_distance_px=40.0, max_unseen=2)
+    first = tracker.update([square_blob(100, 100)]).active[0].track_id
+    update = tracker.update([square_blob(100, 108), square_blob(400, 100)])  # far beyond the gate: new track
+    assert [t.track_id for t in update.active] == [first, first + 1]
+    assert update.active[0].age == 2 and update.active[1].age == 1
+    tracker.update([])
+    update = tracker.update([])
+    assert sorted(t.track_id for t in update.ended) == [first, first + 1]
+    reopened = tracker.update([square_blob(100, 116)]).active
+    assert [t.track_id for t in reopened] == [first + 2]
+    tracker.reset()
+    assert tracker.update([square_blob(100, 116)]).active[0].track_id == first + 3
+
+
+def test_prediction_bridges_missed_frames():
+    tracker = CentroidTracker(max_distance_px=20.0)
+    for v in (100, 110, 120):
+        (track,) = tracker.update([square_blob(200, v)]).active
+    tracker.update([])
+    tracker.update([])
+    (again,) = tracker.update([square_blob(200, 150)]).active  # 30 px from the last sighting, 0 from prediction
+    assert again.track_id == track.track_id and again.unseen == 0
+    assert again.velocity == pytest.approx((0.0, 10.0))
+
+
+def test_stale_track_ghost_does_not_steal_a_live_tracks_blob():
+    """A fillet falling off the edge moves backwards in the image; its extrapolated ghost must not take over."""
+    tracker = CentroidTracker(max_distance_px=40.0, max_unseen=15)
+    for i in range(3):
+        update = tracker.update([square_blob(300, 300 - 2 * i), square_blob(300, 200 + 6 * i)])
+    ghost, live = (t.track_id for t in sorted(update.active, key=lambda t: -t.blob.centroid[1]))
+    for i in range(3, 13):
+        v = 200 + 6 * i + (3 if i == 12 else 0)  # at frame 12 the ghost's prediction (276) is nearer than live's
+        update = tracker.update([square_blob(300, v)])
+        matched = [t.track_id for t in update.active if t.unseen == 0]
+        assert matched == [live], f"frame {i}"
+    assert ghost in [t.track_id for t in update.active]
+
+
+def test_lane_from_the_mean_column():
+    tracker = CentroidTracker(lane_layout=LAYOUT3)
+    blobs = [square_blob(LAYOUT3.lane_center_u(lane) + offset, 100) for lane, offset in ((0, 25), (1, -25), (2, 10))]
+    update = tracker.update(blobs)
+    assert {round(t.blob.centroid[0]): t.lane for t in update.active} == {
+        round(b.centroid[0]): lane for b, lane in zip(blobs, (0, 1, 2))}
+    assert LAYOUT3.lane_center_u(0) > LAYOUT3.lane_center_u(1) > LAYOUT3.lane_center_u(2)  # lane 0 on the right
+    assert LAYOUT3.lane_of_u(10_000) == 0 and LAYOUT3.lane_of_u(-10_000) == 2  # clamped
+    no_layout = CentroidTracker().update([square_blob(100, 100)]).active[0]
+    assert no_layout.lane == -1
+    assert lane_center_u(1, DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 3, 0.16) == pytest.approx(DEFAULT_TOP_K[2])
+
+
+def test_tracker_validates_its_options():
+    with pytest.raises(ValueError):
+        CentroidTracker(max_distance_px=0.0)
+    with pytest.raises(ValueError):
+        CentroidTracker(max_unseen=0)
+
+
+# ------------------------------------------------------------------ Φ and tip cut
+
+EDGE = 200.0
+
+
+def kite(tip_v: float = 50.0) -> np.ndarray:
+    """Tip widening linearly over 100 rows to 100 px, 100 rows of full width, tail narrowing to a point in 50."""
+    return polygon_contour([(200, tip_v), (250, tip_v + 100), (250, tip_v + 200), (200, tip_v + 250),
+                            (150, tip_v + 200), (150, tip_v + 100)])
+
+
+def test_cut_tip_on_a_kite_cuts_at_the_30_percent_width_rows():
+    body = cut_tip(kite(50.0))
+    # width(v) = v - 50 on the tip side and 2·(300 - v) on the tail side; 30 % of 100 px is reached at
+    # v = 80 and v = 285.
+    assert body[:, 1].min() == pytest.approx(80, abs=1)
+    assert body[:, 1].max() == pytest.approx(285, abs=1)
+    assert (body[:, 0].min(), body[:, 0].max()) == (150, 250)
+    # the same shape lying along u is cut the same way with flow_axis='u'
+    turned = cut_tip(kite(50.0)[:, ::-1], flow_axis="u")
+    assert turned[:, 0].min() == pytest.approx(80, abs=1) and turned[:, 0].max() == pytest.approx(285, abs=1)
+    with pytest.raises(ValueError):
+        cut_tip(kite(), flow_axis="x")
+
+
+@pytest.mark.parametrize("ratio", [0.3, 0.5])
+def test_cut_tip_on_a_teardrop_matches_its_analytic_width_profile(ratio):
+    length, width, centre_v = 200.0, 80.0, 200.0
+    contour = polygon_contour(teardrop_polygon((300.0, centre_v), length, width, samples=800))
+    body = cut_tip(contour, tip_ratio=ratio)
+    q = np.linspace(0.0, 1.0, 200_001)
+    wide = teardrop_half_widths(q) >= ratio
+    q_tip, q_tail = q[np.argmax(wide)], q[len(q) - 1 - np.argmax(wide[::-1])]
+    tip_v = centre_v + length / 2  # tip leads at the largest v; q runs from the tip to the tail
+    assert body[:, 1].max() == pytest.approx(tip_v - q_tip * length, abs=1.0)
+    assert body[:, 1].min() == pytest.approx(tip_v - q_tail * length, abs=1.0)
+
+
+def test_solidity_and_aspect_ratio_of_known_shapes():
+    rect = polygon_contour([(0, 0), (100, 0), (100, 50), (0, 50)])
+    assert solidity(rect) == pytest.approx(1.0)
+    assert aspect_ratio(rect) == pytest.approx(2.0)
+    ell = polygon_contour([(0, 0), (100, 0), (100, 50), (50, 50), (50, 100), (0, 100)])
+    assert solidity(ell) == pytest.approx(7500 / 8750)
+    assert solidity(polygon_contour([(0, 0), (10, 0), (20, 0)])) == 0.0
+    assert math.isinf(aspect_ratio(polygon_contour([(0, 0), (10, 0), (20, 0)])))
+
+
+def translating(frames: int, start_tip_v: float = 120.0, step: float = 3.0, length: float = 110.0,
+                width: float = 60.0, bend=None):
+    """Contours of a flat teardrop moving down by ``step`` px a frame; ``bend(points)`` deforms each one."""
+    out = []
+    for i in range(frames):
+        points = teardrop_polygon((300.0, start_tip_v + i * step - length / 2), length, width)
+        out.append(polygon_contour(bend(points) if bend else points))
+    return out
+
+
+def foreshorten(factor: float, narrow: float = 0.0):
+    """Simulated bending: the part beyond the edge is shortened towards it (and optionally narrowed)."""
+    def bend(points: np.ndarray) -> np.ndarray:
+        p = points.copy()
+        over = p[:, 1] > EDGE
+        p[over, 1] = EDGE + (p[over, 1] - EDGE) * factor
+        p[over, 0] = 300.0 + (p[over, 0] - 300.0) * (1.0 - narrow)
+        return p
+    return bend
+
+
+def run_evaluator(contours, edge: float = EDGE):
+    evaluator = ShapeEvaluator(edge)
+    for i, contour in enumerate(contours):
+        result = evaluator.update(contour, i / FPS)
+        if result is not None:
+            return i, result, evaluator
+    return None, None, evaluator
+
+
+def test_phi_of_an_unchanged_contour_is_zero():
+    index, result, evaluator = run_evaluator(translating(80))
+    assert result is not None and result.status == STATUS_SCORED and result.reason == ""
+    assert result.frames >= 5
+    assert result.phi < 1e-6 and result.hu_term < 1e-8 and result.solidity_term < 1e-8
+    assert evaluator.done and evaluator.update(translating(1)[0], 99.0) is None and evaluator.finish() is None
+    reference = make_reference(translating(1)[0])
+    assert shape_terms(reference, cut_tip(translating(1)[0])) == (0.0, 0.0)
+
+
+def test_phi_grows_monotonically_with_bending():
+    flat = teardrop_polygon((300.0, 190.0), 110.0, 60.0)  # tip 55 px beyond the edge at 200
+    reference = make_reference(polygon_contour(flat))
+    phis = []
+    for degrees in (0, 5, 10, 20, 30, 45, 60, 75):
+        theta = math.radians(degrees)
+        bent = foreshorten(math.cos(theta), narrow=0.5 * (1.0 - math.cos(theta)))(flat)
+        hu, sol = shape_terms(reference, cut_tip(polygon_contour(bent)))
+        phis.append(100.0 * hu + 100.0 * sol)
+    assert phis[0] < 1e-6
+    assert all(b > a for a, b in zip(phis, phis[1:])), phis
+    assert phis[-1] > 10.0
+
+
+def test_flexible_fillet_scores_clearly_higher_than_a_rigid_one():
+    def phi(curvature: float, across: float) -> float:
+        scene = TopScene([TopFillet(lead_m=-0.25, across_m=across, curvature_per_m=curvature)])
+        background = scene.background_depth()
+        evaluator = ShapeEvaluator(scene.edge_row)
+        for i in range(60):
+            blobs = segment_depth(scene.render(i / FPS)[1], background)
+            if blobs:
+                result = evaluator.update(blobs[0].contour, i / FPS)
+                if result is not None:
+                    assert result.status == STATUS_SCORED and result.frames >= 3
+                    return result.phi
+        raise AssertionError("window never closed")
+
+    for across in (0.0, 0.16):
+        rigid, flexible = phi(0.5, across), phi(14.0, across)
+        assert flexible > 2.5 * rigid and flexible - rigid > 5.0, (across, rigid, flexible)
+
+
+def test_window_closes_when_the_virtual_centroid_crosses_the_edge():
+    flat = translating(80)
+    body_centroids = [moments_centroid_v(cut_tip(c)) for c in flat]
+    opens = next(i for i, c in enumerate(flat) if c[:, 1].max() >= EDGE - 2.0)
+    closes = next(i for i, v in enumerate(body_centroids) if v >= EDGE)
+    assert closes > opens + 2
+    index, result, _ = run_evaluator(flat)
+    assert index == closes and result.stamp == pytest.approx(closes / FPS)
+    assert result.frames == closes - opens + 1
+    assert result.reference_stamp == pytest.approx((opens - 1) / FPS)
+
+    # Bent over the edge, the body's real centroid lags, but the window still closes on the same frame:
+    # the virtual centroid follows the flat trailing edge plus the offset locked while flat.
+    bent = translating(80, bend=foreshorten(0.4))
+    index_bent, result_bent, _ = run_evaluator(bent)
+    assert index_bent == closes and result_bent.status == STATUS_SCORED
+    assert moments_centroid_v(cut_tip(bent[closes])) < EDGE - 5.0
+    assert result_bent.phi > 1.0
+
+
+def test_unscored_when_the_track_starts_past_the_edge():
+    evaluator = ShapeEvaluator(EDGE)
+    result = evaluator.update(translating(1, start_tip_v=EDGE + 5.0)[0], 0.0)
+    assert result.status == STATUS_UNSCORED and result.reason == REASON_STARTED_PAST_EDGE
+    assert math.isnan(result.phi) and math.isnan(result.aspect_ratio) and result.reference_stamp is None
+    assert evaluator.finish() is None
+
+
+def test_unscored_when_the_track_is_lost_in_the_window_or_before_the_edge():
+    contours = translating(80)
+    opens = next(i for i, c in enumerate(contours) if c[:, 1].max() >= EDGE - 2.0)
+    evaluator = ShapeEvaluator(EDGE)
+    for i in range(opens + 2):
+        assert evaluator.update(contours[i], i / FPS) is None
+    result = evaluator.finish()
+    assert result.status == STATUS_UNSCORED and result.reason == REASON_LOST_IN_WINDOW
+    assert result.frames == 2 and result.stamp == pytest.approx((opens + 1) / FPS)
+    assert evaluator.finish() is None
+
+    early = ShapeEvaluator(EDGE)
+    early.update(contours[0], 0.0)
+    assert early.finish().reason == REASON_LOST_BEFORE_EDGE
+
+
+def test_shape_scorer_reports_each_track_once_with_its_id_and_lane():
+    scorer = ShapeScorer(EDGE)
+    contours = translating(80)
+    tracker = CentroidTracker(lane_layout=LAYOUT3, max_distance_px=40.0, max_unseen=3)
+    results = []
+    for i, contour in enumerate(contours[:60]):
+        m = cv2.moments(contour)
+        blob = Blob(contour, (m["m10"] / m["m00"], m["m01"] / m["m00"]), int(m["m00"]), cv2.boundingRect(contour), 0.02)
+        results += scorer.update(tracker.update([blob]), i / FPS)
+    for i in range(60, 64):
+        results += scorer.update(tracker.update([]), i / FPS)
+    assert len(results) == 1 and results[0].status == STATUS_SCORED
+    assert results[0].track_id == 0 and results[0].lane == LAYOUT3.lane_of_u(300.0)
+
+
+def test_evaluator_options_are_validated():
+    with pytest.raises(ValueError):
+        ShapeEvaluator(EDGE, tip_ratio=1.0)
+    with pytest.raises(ValueError):
+        ShapeEvaluator(EDGE, reference_margin_px=-1.0)
+    with pytest.raises(ValueError):
+        ShapeScorer(EDGE, tip_ratio=0.0)
+
+
+# ------------------------------------------------------------- frame checks
+
+
+def image_msg(array: np.ndarray, encoding: str, stamp: float = 0.0, pad: int = 0, bigendian: bool = False,
+              width: int | None = None, height: int | None = None):
+    rows = np.ascontiguousarray(array)
+    row_bytes = int(np.prod(rows.shape[1:])) * rows.itemsize
+    raw = np.frombuffer(rows.tobytes(), np.uint8).reshape(rows.shape[0], row_bytes)
+    if pad:
+        raw = np.concatenate([raw, np.zeros((raw.shape[0], pad), np.uint8)], axis=1)
+    sec = int(math.floor(stamp))
+    return SimpleNamespace(
+        encoding=encoding, height=rows.shape[0] if height is None else height,
+        width=rows.shape[1] if width is None else width, step=raw.shape[1], data=raw.tobytes(),
+        is_bigendian=int(bigendian), header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=int(round((stamp - sec) * 1e9)))))
+
+
+def test_image_to_array_round_trips_and_handles_row_padding_and_endianness():
+    depth = np.arange(12, dtype=np.float32).reshape(3, 4)
+    assert np.array_equal(image_to_array(image_msg(depth, "32FC1"), "32FC1"), depth)
+    assert np.array_equal(image_to_array(image_msg(depth, "32FC1", pad=8), "32FC1"), depth)
+    swapped = depth.astype(">f4")
+    assert np.array_equal(image_to_array(image_msg(swapped, "32FC1", bigendian=True), "32FC1"), depth)
+    rgb = np.arange(2 * 3 * 3, dtype=np.uint8).reshape(2, 3, 3)
+    assert np.array_equal(image_to_array(image_msg(rgb, "rgb8"), "rgb8"), rgb)
+
+
+def test_image_to_array_rejects_wrong_encoding_and_size():
+    depth = np.zeros((3, 4), np.float32)
+    with pytest.raises(FrameError, match="encoding"):
+        image_to_array(image_msg(depth, "16UC1"), "32FC1")
+    with pytest.raises(FrameError):
+        image_to_array(image_msg(depth, "32FC1", height=5), "32FC1")  # says 5 rows, holds 3
+    with pytest.raises(FrameError):
+        image_to_array(image_msg(depth, "32FC1", width=8), "32FC1")  # row step too short for 8 floats
+    with pytest.raises(FrameError, match="empty"):
+        image_to_array(image_msg(np.zeros((0, 4), np.float32), "32FC1"), "32FC1")
+    with pytest.raises(FrameError, match="unsupported"):
+        image_to_array(image_msg(depth, "yuv422"), "yuv422")
+    msg = image_msg(depth, "32FC1")
+    msg.data = msg.data[:-1]
+    with pytest.raises(FrameError):
+        image_to_array(msg, "32FC1")
+
+
+class Logger:
+    def __init__(self):
+        self.lines: list[str] = []
+
+    def warning(self, text: str) -> None:
+        self.lines.append(text)
+
+
+def test_frame_checker_flags_out_of_order_stamps_and_restarts():
+    checker = FrameChecker(Logger())
+    depth = np.zeros((3, 4), np.float32)
+    checker.check(image_msg(depth, "32FC1", 10.0), depth.shape)
+    checker.check(image_msg(depth, "32FC1", 10.1), depth.shape)
+    with pytest.raises(FrameError, match="out-of-order"):
+        checker.check(image_msg(depth, "32FC1", 10.05), depth.shape)
+    with pytest.raises(FrameError, match="out-of-order"):
+        checker.check(image_msg(depth, "32FC1", 10.1), depth.shape)  # a repeated stamp
+    checker.check(image_msg(depth, "32FC1", 10.2), depth.shape)
+    assert not checker.restarted
+    checker.check(image_msg(depth, "32FC1", 2.0), depth.shape)  # far back in time: a restart (e.g. replay)
+    assert checker.restarted
+    checker.check(image_msg(depth, "32FC1", 2.1), depth.shape)
+    assert not checker.restarted
+
+
+def test_frame_checker_rejects_a_resize_until_it_persists():
+    checker = FrameChecker(Logger())
+    small, big = np.zeros((3, 4), np.float32), np.zeros((6, 8), np.float32)
+    checker.check(image_msg(small, "32FC1", 0.0), small.shape)
+    for i in range(1, RESIZE_CONFIRM_FRAMES):
+        with pytest.raises(FrameError, match="size"):
+            checker.check(image_msg(big, "32FC1", i * 0.1), big.shape)
+    checker.check(image_msg(big, "32FC1", RESIZE_CONFIRM_FRAMES * 0.1), big.shape)
+    assert checker.restarted
+
+
+def test_frame_checker_counts_rejects_and_throttles_the_log():
+    logger = Logger()
+    checker = FrameChecker(logger, log_period_s=60.0)
+    for _ in range(5):
+        checker.reject("encoding 'bgr8' where rgb8 is expected; frame skipped")
+    checker.reject("empty frame (0 pixels); frame skipped")
+    assert checker.rejected == 6 and len(logger.lines) == 2
+
+
+# ------------------------------------------------------------ grading rules
+
+
+def test_grading_rules_classify_lower_phi_as_woody():
+    rules = GradingRules(threshold=10.0)
+    assert rules.classify(5.4).label == "woody" and rules.classify(19.1).label == "normal"
+    assert rules.classify(10.0).label == "normal"  # strictly below the threshold is woody
+    assert rules.classify(5.4).grade is None
+    graded = GradingRules(threshold=10.0, moderate_threshold=12.0, severe_threshold=6.0)
+    assert [graded.grade(p) for p in (3.0, 6.0, 11.0, 12.0, 20.0)] == [
+        "severe", "moderate", "moderate", "normal", "normal"]
+    assert graded.classify(11.0).label == "normal" and graded.classify(11.0).grade == "moderate"
+    assert GradingRules(threshold=10.0, severe_threshold=4.0).grade(8.0) == "moderate"
+    for bad_phi in (math.nan, math.inf):
+        with pytest.raises(ValueError):
+            rules.classify(bad_phi)
+
+
+@pytest.mark.parametrize("kwargs", [
+    dict(threshold=0.0), dict(threshold=-1.0), dict(threshold=math.nan), dict(threshold=math.inf),
+    dict(threshold=True), dict(threshold="10"), dict(threshold=10.0, moderate_threshold=8.0),
+    dict(threshold=10.0, severe_threshold=10.0), dict(threshold=10.0, severe_threshold=12.0),
+    dict(threshold=10.0, moderate_threshold=6.0, severe_threshold=8.0), dict(threshold=10.0, severe_threshold=-1.0),
+])
+def test_grading_rules_are_validated(kwargs):
+    with pytest.raises(ValueError):
+        GradingRules(**kwargs)
