@@ -1,0 +1,102 @@
+"""The cameras: metric depth, the roller edge where calibration says, side view of the watched lane only."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from woody_sim.line_geometry import LineGeometry
+from woody_sim.rendering import (LineRenderer, RenderProcess, camera_info_fields, draped_poses, flat_poses,
+                                 load_reference_visuals)
+
+
+@pytest.fixture(scope="module")
+def geometry():
+    return LineGeometry()
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return load_reference_visuals(0, 40)
+
+
+def test_empty_belt_depth_and_edge_row(geometry):
+    renderer = LineRenderer(geometry, render_side=False)
+    rgb, depth = renderer.render_top({})
+    assert rgb.shape == (376, 672, 3) and rgb.dtype == np.uint8
+    assert depth.shape == (376, 672) and depth.dtype == np.float32
+    assert depth[188, 336] == pytest.approx(geometry.top_height, abs=0.001)
+    edge = geometry.top_edge_row()
+    column = depth[:, 336]
+    assert np.all(column[: int(edge) - 1] < geometry.top_height + 0.01)  # belt up to the edge row
+    assert np.all(column[int(edge) + 30:] > geometry.top_height + 0.3)  # the floor beyond the roller
+    assert np.all(column[int(edge) + 1:int(edge) + 5] > geometry.top_height)  # the roller curving away
+
+
+def test_flat_fillet_top_is_at_its_thickness(geometry, reference):
+    visuals, offsets = reference
+    renderer = LineRenderer(geometry, render_side=False)
+    renderer.add_fillet(0, 1, visuals)
+    _, depth = renderer.render_top({0: flat_poses(offsets, -0.35, geometry.lane_y(1))})
+    thickness = max(float(np.asarray(v.vertices)[:, 2].max()) for v in visuals) - min(
+        float(np.asarray(v.vertices)[:, 2].min()) for v in visuals)
+    assert depth.min() == pytest.approx(geometry.top_height - thickness, abs=0.002)
+    mask = depth < geometry.top_height - 0.003
+    assert 2000 < mask.sum() < 8000  # a ~0.19 x 0.10 m fillet at ~490 px/m
+
+
+def test_fillet_bent_over_the_roller_covers_less_of_the_top_view(geometry, reference):
+    visuals, offsets = reference
+    renderer = LineRenderer(geometry, render_side=False)
+    renderer.add_fillet(0, 1, visuals)
+    y = geometry.lane_y(1)
+    _, flat = renderer.render_top({0: flat_poses(offsets, -0.35, y)})
+    _, bent = renderer.render_top({0: draped_poses(offsets, 0.02, y, geometry.roller_radius)})
+    background = renderer.render_top({})[1]
+    area = lambda depth: int((background - depth > 0.003).sum())
+    assert area(bent) < 0.8 * area(flat)
+
+
+def test_side_view_shows_roller_and_only_the_watched_lane(geometry, reference):
+    visuals, offsets = reference
+    renderer = LineRenderer(geometry, render_top=False)
+    empty = renderer.render_side({})
+    u, v = (int(round(c)) for c in geometry.side_axle_pixel())
+    radius = geometry.side_roller_radius_px()
+    outside = empty[v, u + int(radius) + 8].astype(int)
+    for inside in (empty[v, u], empty[v, u + int(radius) - 5], empty[v + int(radius) - 5, u]):
+        assert np.abs(inside.astype(int) - outside).sum() > 30  # the roller disc ends ~R px from the axle
+    renderer.add_fillet(0, geometry.watched_lane, visuals)
+    renderer.add_fillet(1, 0, visuals)
+    watched = renderer.render_side({0: flat_poses(offsets, -0.3, geometry.lane_y(geometry.watched_lane)),
+                                    1: flat_poses(offsets, -0.3, geometry.lane_y(0))})
+    other_only = renderer.render_side({0: flat_poses(offsets, -2.0, geometry.lane_y(geometry.watched_lane)),
+                                       1: flat_poses(offsets, -0.3, geometry.lane_y(0))})
+    assert (np.abs(watched.astype(int) - empty.astype(int)).sum(axis=2) > 30).sum() > 1000
+    assert np.array_equal(other_only, empty)
+
+
+def test_render_process_matches_in_process_renderer(geometry, reference):
+    visuals, offsets = reference
+    poses = {3: draped_poses(offsets, 0.0, geometry.lane_y(1), geometry.roller_radius)}
+    local = LineRenderer(geometry)
+    local.add_fillet(3, 1, visuals)
+    with RenderProcess(geometry) as remote:
+        remote.add_fillet(3, 1, visuals)
+        remote.submit(poses, want_top=True, want_side=True)
+        frames = remote.collect()
+    rgb, depth = local.render_top(poses)
+    assert np.array_equal(frames.top_rgb, rgb) and np.array_equal(frames.top_depth, depth)
+    assert np.array_equal(frames.side_rgb, local.render_side(poses))
+
+
+def test_bad_input_is_refused(geometry, reference):
+    visuals, offsets = reference
+    renderer = LineRenderer(geometry)
+    renderer.add_fillet(0, 1, visuals)
+    with pytest.raises(ValueError, match="unknown fillet"):
+        renderer.render_top({5: flat_poses(offsets, -0.3, 0.0)})
+    with pytest.raises(ValueError):
+        renderer.render_top({0: np.zeros((3, 7))})
+    info = camera_info_fields(geometry.top_camera())
+    assert info["width"] == 672 and info["K"][0] == pytest.approx(geometry.top_camera().fx)
