@@ -23,8 +23,9 @@ import numpy as np
 from woody_sim.meshes import FilletMesh, HeightMap
 
 DEFAULT_SEGMENTS = 40
-DEFAULT_TOTAL_MASS = 20.0
-"""Total chain mass M (kg), a tuning value like the paper's M = 100 (see docs/physics.md)."""
+DEFAULT_TOTAL_MASS = 2.5
+"""Total chain mass M (kg), a tuning value like the paper's M = 100, set by `woody calibrate` (side view,
+ΔNMDM(k=100 − k=0) at 100 FPM towards the physical 0.25; docs/results.md). Was 20 before calibration."""
 VISUAL_ROWS = 20
 """Points across the width in each visual cross-section."""
 VISUAL_STATIONS = 2

@@ -3,54 +3,28 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 
-
-def _run(args: argparse.Namespace) -> int:
-    from woody_tools import line_run
-
-    return line_run.run(args)
-
-
-def _replay(args: argparse.Namespace) -> int:
-    from woody_tools import replay
-
-    return replay.run(args)
-
-
-def _report(args: argparse.Namespace) -> int:
-    from woody_tools import report_command
-
-    return report_command.run(args)
-
-
-def _bench(args: argparse.Namespace) -> int:
-    from woody_tools import bench
-
-    return bench.run(args)
+SUBCOMMANDS = [
+    ("run", "line_run", "run a multi-lane line: sim + vision + gate + recorder; bag, verdicts.csv, report.md"),
+    ("replay", "replay", "republish a recorded bag with its original timing and /clock"),
+    ("report", "report_command", "rebuild report.md and plots from a bag or a verdicts.csv"),
+    ("bench", "bench", "benchmarks: `woody bench sim` and `woody bench vision`"),
+    ("sweep", "sweep", "the paper's drop-test grid (meshes x k x speed), parallel and resumable; runs.csv, results.md"),
+    ("calibrate", "calibrate", "tune the total mass M and the Φ threshold; writes them as the defaults"),
+]
+"""(subcommand, module in woody_tools with add_arguments(parser) and run(args) -> int, help)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="woody", description="Woody-breast grading line: run, record, replay, report.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
-    from woody_tools import bench, line_run, replay, report_command
-
-    run = sub.add_parser("run", help="run a multi-lane line: sim + vision + gate + recorder; bag, verdicts.csv, report.md")
-    line_run.add_arguments(run)
-    run.set_defaults(func=_run)
-
-    rep = sub.add_parser("replay", help="republish a recorded bag with its original timing and /clock")
-    replay.add_arguments(rep)
-    rep.set_defaults(func=_replay)
-
-    report = sub.add_parser("report", help="rebuild report.md and plots from a bag or a verdicts.csv")
-    report_command.add_arguments(report)
-    report.set_defaults(func=_report)
-
-    b = sub.add_parser("bench", help="benchmarks: `woody bench sim` and `woody bench vision`")
-    bench.add_arguments(b)
-    b.set_defaults(func=_bench)
+    for name, module_name, help_text in SUBCOMMANDS:
+        module = importlib.import_module(f"woody_tools.{module_name}")
+        command = sub.add_parser(name, help=help_text)
+        module.add_arguments(command)
+        command.set_defaults(func=module.run)
     return parser
 
 

@@ -4,14 +4,32 @@
 processes. It drives the same modules the nodes use — LineWorld (pybullet),
 LineRenderer, segmentation, tracking, FilletGrader (Φ) and
 SidePassageTracker (NMDM, MDM, BE) — but renders only the frames the scores
-need: top-down frames while some fillet is near the roller edge, side frames
-while the watched lane's fillet is in the side camera's view.
+need:
+
+* top-down frames at the camera rate ``TOP_RATE_HZ`` (on the absolute time
+  grid) only once some fillet's leading end is within ``TOP_START_X`` of the
+  roller edge: Φ's reference is the last flat contour before the leading edge
+  reaches the edge, and its window closes when the virtual centroid crosses
+  it, so earlier frames never enter the score;
+* side frames at ``SIDE_FAR_RATE_HZ`` while the watched fillet rides the belt
+  (enough to follow it and measure its flat height h), then at
+  ``SIDE_RATE_HZ`` once it is a live chain at the roller (where the minimum
+  MDM and the BE frame are).
+
+The side tracker gets the empty-scene side frame as its background (the
+fillets are already in the side camera's view at spawn, so learning the
+background from the first frame, as the node does on a line that starts
+empty, would bake a fillet into it). One LineRenderer per lane count is kept
+per process and reused (its construction renders both backgrounds); the
+pybullet world is rebuilt per run (cheap) so every run starts identically.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from woody_sim.line_geometry import LineGeometry, fpm_to_mps
 from woody_sim.line_world import LineWorld, PhysicsConfig
@@ -30,8 +48,16 @@ SPAWN_X = -0.42
 """Sweeps spawn just inside the top camera's view (fillet centre, m): only the approach the scores need."""
 
 TOP_RATE_HZ = 30.0
+TOP_START_X = -0.12
+"""Top frames start once a fillet's leading end is this close to the roller edge (m; >= 7 frames before it at 130 FPM)."""
 SIDE_RATE_HZ = 100.0
+SIDE_FAR_RATE_HZ = 8.0
+SIDE_DONE_DISTANCE = 0.12
+"""The side passage is closed once the watched fillet's centre of mass is below the axle and this far (m) from it:
+the centroid only moves away from the axle from then on (it falls), so no later frame can lower the MDM."""
 MAX_SIM_S = 4.0
+
+_RENDERERS: dict[tuple[int, bool, bool], tuple[LineRenderer, np.ndarray | None, np.ndarray | None]] = {}
 
 
 @dataclass(frozen=True)
@@ -51,50 +77,96 @@ class RunSpec:
         return (self.mesh, float(self.k), float(self.speed_fpm), self.mass)
 
 
-def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None = None) -> list[dict]:
-    """Simulate one run and return one row per lane (RUN_COLUMNS)."""
+def _renderer(geometry: LineGeometry, top: bool, side: bool):
+    key = (geometry.lanes, top, side)
+    if key not in _RENDERERS:
+        renderer = LineRenderer(geometry, render_top=top, render_side=side)
+        top_bg = renderer.render_top({})[1] if top else None
+        side_bg = renderer.render_side({}) if side else None
+        _RENDERERS[key] = (renderer, top_bg, side_bg)
+    renderer, top_bg, side_bg = _RENDERERS[key]
+    renderer.clear()
+    return renderer, top_bg, side_bg
+
+
+def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None = None,
+                 side_rate_hz: float = SIDE_RATE_HZ, top_start_x: float | None = TOP_START_X,
+                 stats: dict | None = None) -> list[dict]:
+    """Simulate one run and return one row per lane (RUN_COLUMNS).
+
+    ``top_start_x=None`` renders top frames from the start; ``stats`` (if given)
+    receives frame counts.
+    """
     geometry = LineGeometry(lanes=spec.lanes, spawn_x=SPAWN_X)
+    renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side)
     world = LineWorld(geometry, config or PhysicsConfig())
-    renderer = LineRenderer(geometry, render_top=spec.top, render_side=spec.side)
     speed = fpm_to_mps(spec.speed_fpm)
     mass = spec.mass if spec.mass is not None else _default_mass()
-    top_cam = geometry.top_camera()
-    k_matrix = tuple(top_cam.k.reshape(-1))
-    layout = LaneLayout(k_matrix, geometry.top_height, spec.lanes, geometry.lane_pitch)
-    grader = FilletGrader(geometry.top_edge_row(), watched_lane=None)
-    tracker = CentroidTracker(lane_layout=layout)
-    background = BackgroundModel(1)
-    side = SidePassageTracker(axle_px=geometry.side_axle_pixel(), roller_radius_px=geometry.side_roller_radius_px())
     results: dict[int, dict] = {}
     side_result = None
+    n_top = n_side = 0
+    watched = geometry.watched_lane
     try:
         if spec.top:
-            background.add(renderer.render_top({})[1])
+            top_cam = geometry.top_camera()
+            layout = LaneLayout(tuple(top_cam.k.reshape(-1)), geometry.top_height, spec.lanes, geometry.lane_pitch)
+            grader = FilletGrader(geometry.top_edge_row(), watched_lane=None)
+            tracker = CentroidTracker(lane_layout=layout)
+            background = BackgroundModel(1)
+            background.add(top_bg)
+        if spec.side:
+            side = SidePassageTracker(axle_px=geometry.side_axle_pixel(),
+                                      roller_radius_px=geometry.side_roller_radius_px(), background=side_bg)
+        watched_fid = None
         for lane in range(spec.lanes):
             fid = world.spawn(mesh, k=spec.k, lane=lane, mass=mass, speed_mps=speed)
             renderer.add_fillet(fid, lane, world.model(fid).visuals)
-        next_top, next_side = 0.0, 0.0
+            if lane == watched:
+                watched_fid = fid
+        model = world.model(watched_fid)
+        lead_offset = float(model.box_centers[-1, 0] + model.box_half_extents[-1, 0])
+        top_dt, next_top, next_side = 1.0 / TOP_RATE_HZ, 0.0, 0.0
         top_done = not spec.top
+        axle = geometry.roller_axle
         while world.time < MAX_SIM_S and world.fillets:
             now = world.step()
             for fid in world.take_removed():
                 renderer.remove_fillet(fid)
+            poses = None
             if not top_done and now + 1e-9 >= next_top:
-                next_top += 1.0 / TOP_RATE_HZ
-                _, depth = renderer.render_top(world.segment_poses())
-                update = tracker.update(segment_depth(depth, background.depth))
-                observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen) for t in update.active]
-                for graded in grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
-                    results.setdefault(graded.lane, _shape_row(graded))
-                top_done = len(results) >= spec.lanes
+                next_top += top_dt * max(1, math.floor((now + 1e-9 - next_top) / top_dt) + 1)
+                if top_start_x is None or n_top or SPAWN_X + speed * now + lead_offset >= top_start_x:
+                    poses = world.segment_poses()
+                    _, depth = renderer.render_top(poses)
+                    n_top += 1
+                    update = tracker.update(segment_depth(depth, background.depth))
+                    observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen)
+                                    for t in update.active]
+                    for graded in grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
+                        results.setdefault(graded.lane, _shape_row(graded))
+                    top_done = len(results) >= spec.lanes
             if spec.side and side_result is None and now + 1e-9 >= next_side:
-                next_side += 1.0 / SIDE_RATE_HZ
-                for measurement in side.update(renderer.render_side(world.segment_poses()), now):
+                gone = watched_fid not in world.fillets
+                near = gone or world.is_dynamic(watched_fid)
+                next_side += 1.0 / (side_rate_hz if near else SIDE_FAR_RATE_HZ)
+                if not gone and near:
+                    com = world.center_of_mass(watched_fid)
+                    gone = com[2] < axle[1] and math.hypot(com[0] - axle[0], com[2] - axle[1]) > SIDE_DONE_DISTANCE
+                frame = side_bg if gone else renderer.render_side(poses or world.segment_poses())
+                n_side += 0 if gone else 1
+                for measurement in side.update(frame, now):
                     side_result = measurement
             if top_done and (not spec.side or side_result is not None):
                 break
+        if spec.side and side_result is None:  # the run ended with the passage still open: close it
+            for _ in range(side.end_frames):
+                for measurement in side.update(side_bg, world.time):
+                    side_result = measurement
     finally:
         world.close()
+        renderer.clear()
+    if stats is not None:
+        stats.update(top_frames=n_top, side_frames=n_side, sim_s=world.time)
     rows = []
     for lane in range(spec.lanes):
         row = {"mesh": spec.mesh, "k": spec.k, "speed_fpm": spec.speed_fpm, "lane": lane, "mass": mass,
@@ -102,20 +174,23 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                "be": math.nan, "status": "unscored" if spec.top else "", "reason": ""}
         if spec.top:
             row.update(results.get(lane, {"reason": "no verdict before the run ended"}))
-        if lane == geometry.watched_lane and side_result is not None:
-            row.update(nmdm=side_result.nmdm, mdm=side_result.mdm_min_px, be=side_result.be)
+        if spec.side and lane == watched:
+            if side_result is not None:
+                row.update(nmdm=float(side_result.nmdm), mdm=float(side_result.mdm_min_px),
+                           be=float(side_result.be))
+            elif not spec.top:
+                row.update(status="unscored", reason="no side-view measurement")
         rows.append(row)
     return rows
 
 
 def _shape_row(graded) -> dict:
     shape = graded.shape
-    return {"phi": shape.phi, "hu_term": shape.hu_term, "solidity_term": shape.solidity_term,
+    return {"phi": float(shape.phi), "hu_term": float(shape.hu_term), "solidity_term": float(shape.solidity_term),
             "status": shape.status, "reason": shape.reason}
 
 
 def _default_mass() -> float:
-    from woody_sim.fillet_model import DEFAULT_TOTAL_MASS
+    from woody_sim import fillet_model
 
-    return DEFAULT_TOTAL_MASS
-
+    return fillet_model.DEFAULT_TOTAL_MASS

@@ -16,8 +16,9 @@ import math
 import numbers
 from dataclasses import dataclass
 
-DEFAULT_PHI_THRESHOLD = 10.0
-"""Provisional binary cut between the paper's normal (≈19) and severe (≈5.4) means at 100 FPM; to be calibrated."""
+DEFAULT_PHI_THRESHOLD = 8.72
+"""Binary cut set by `woody calibrate`: max balanced accuracy, normal k=0 vs severe k=100, calibration meshes
+generated:8:9, 100 and 130 FPM, 3 lanes, at the calibrated mass (docs/results.md)."""
 
 LABEL_NORMAL = "normal"
 LABEL_WOODY = "woody"

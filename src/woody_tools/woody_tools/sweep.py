@@ -1,0 +1,244 @@
+"""`woody sweep`: the paper's drop-test grid (meshes x k x line speed), headless, parallel and resumable.
+
+One run = the same mesh in every lane at one stiffness k and speed
+(:func:`woody_tools.experiment.evaluate_run`); it yields one row per lane
+(fillet). Top-down columns (phi, hu_term, solidity_term) come from every lane,
+side-view columns (nmdm, mdm, be) from the centre lane the side camera
+watches, empty elsewhere. Rows are appended to ``runs.csv`` as each run
+finishes, so a killed sweep loses at most the runs in flight; a rerun skips
+every run whose rows are all there (a run with missing lane rows is redone).
+At the end ``results.md`` and the plots are (re)built from the whole CSV.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import shlex
+import sys
+import time
+from pathlib import Path
+
+from woody_tools.experiment import RUN_COLUMNS, RunSpec
+
+TOP_K = (0.0, 20.0, 40.0, 60.0, 80.0, 100.0)
+"""Paper, top-down view (Table tdv_results)."""
+SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
+"""Paper, side view (Table sv_results)."""
+DEFAULT_K = tuple(sorted(set(TOP_K) | set(SIDE_K)))
+DEFAULT_SPEEDS = (100.0, 130.0)
+DEFAULT_MESHES = "builtin,generated:24:1"
+"""30 meshes; generated seeds 10000+ are disjoint from the calibration set (see calibrate.py)."""
+META_FILE = "sweep_meta.json"
+CSV_FILE = "runs.csv"
+
+
+def _floats(text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+    if not values:
+        raise argparse.ArgumentTypeError("empty list")
+    return values
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--meshes", default=DEFAULT_MESHES,
+                        help="mesh set: builtin, generated:N[:SEED], a folder or file; comma-combinable "
+                             f"(default {DEFAULT_MESHES})")
+    parser.add_argument("--k", type=_floats, default=list(DEFAULT_K),
+                        help="hinge stiffnesses, comma-separated (default: union of the paper's top-down "
+                             "0..100 and side-view 0,10,100,200,400)")
+    parser.add_argument("--speeds", type=_floats, default=list(DEFAULT_SPEEDS), help="line speeds in FPM (default 100,130)")
+    parser.add_argument("--lanes", type=int, default=3, help="identical fillets side by side per run (default 3)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: cores)")
+    parser.add_argument("--out", default="sweep-out", help="output folder (runs.csv, results.md, *.png)")
+    parser.add_argument("--mass", type=float, default=None,
+                        help="total chain mass M in kg (default: the calibrated fillet_model.DEFAULT_TOTAL_MASS)")
+    parser.add_argument("--no-side", action="store_true", help="skip the side view (top-down Φ only)")
+    parser.add_argument("--no-report", action="store_true", help="only run; do not rebuild results.md and plots")
+    parser.add_argument("--docs", default=None, metavar="DIR",
+                        help="also write results.md to DIR/results.md and the plots to DIR/results/ (e.g. docs)")
+
+
+# ---------------------------------------------------------------- csv helpers
+
+def _key(mesh: str, k: float, speed: float, mass: float) -> tuple:
+    return (mesh, round(float(k), 6), round(float(speed), 6), round(float(mass), 6))
+
+
+def read_rows(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _write_rows(path: Path, rows: list[dict], mode: str) -> None:
+    new = mode == "w" or not path.exists() or path.stat().st_size == 0
+    with path.open(mode, newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=RUN_COLUMNS, extrasaction="ignore")
+        if new:
+            writer.writeheader()
+        for row in rows:
+            writer.writerow({c: _fmt(row.get(c, "")) for c in RUN_COLUMNS})
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def _fmt(value) -> object:
+    if isinstance(value, float):
+        return "" if math.isnan(value) else f"{value:.6g}"
+    return value
+
+
+def completed_runs(path: Path, lanes: int) -> set[tuple]:
+    """Keys of runs with all their lane rows in the CSV; rows of incomplete runs are dropped from the file."""
+    rows = read_rows(path)
+    by_run: dict[tuple, list[dict]] = {}
+    for row in rows:
+        try:
+            key = _key(row["mesh"], float(row["k"]), float(row["speed_fpm"]), float(row["mass"]))
+        except (KeyError, ValueError):
+            continue
+        by_run.setdefault(key, []).append(row)
+    done = {key for key, rs in by_run.items() if {int(r["lane"]) for r in rs} >= set(range(lanes))}
+    keep = [r for key, rs in by_run.items() if key in done for r in rs]
+    if len(keep) != len(rows):
+        _write_rows(path, keep, "w")
+    return done
+
+
+# ---------------------------------------------------------------- workers
+
+_MESHES: dict = {}
+
+
+def _load_meshes(spec: str) -> dict:
+    from woody_sim.meshes import load_mesh_set
+
+    meshes, errors = load_mesh_set(spec)
+    for error in errors:
+        print(f"woody sweep: skipped mesh: {error}", file=sys.stderr)
+    by_name = {}
+    for mesh in meshes:
+        by_name.setdefault(mesh.name, mesh)
+    return by_name
+
+
+def _worker_init(spec: str) -> None:
+    global _MESHES
+    if not _MESHES:
+        _MESHES = _load_meshes(spec)
+
+
+def _work(run: RunSpec) -> list[dict]:
+    from woody_tools.experiment import evaluate_run
+
+    try:
+        return evaluate_run(run, _MESHES[run.mesh])
+    except Exception as exc:  # one broken mesh must not stop the sweep
+        return [{"mesh": run.mesh, "k": run.k, "speed_fpm": run.speed_fpm, "lane": lane, "mass": run.mass,
+                 "status": "error", "reason": f"{type(exc).__name__}: {exc}"} for lane in range(run.lanes)]
+
+
+def run_grid(runs: list[RunSpec], mesh_spec: str, jobs: int, csv_path: Path, desc: str = "sweep") -> tuple[int, float]:
+    """Evaluate the runs in parallel, appending rows as they finish; returns (rows written, wall s)."""
+    from tqdm import tqdm
+
+    global _MESHES
+    if not runs:
+        return 0, 0.0
+    _MESHES = _load_meshes(mesh_spec)  # forked workers inherit the loaded meshes
+    written = 0
+    start = time.perf_counter()
+    with tqdm(total=len(runs), unit="run", desc=desc, dynamic_ncols=True, file=sys.stderr) as bar:
+        if jobs <= 1:
+            for run in runs:
+                rows = _work(run)
+                _write_rows(csv_path, rows, "a")
+                written += len(rows)
+                bar.update(1)
+        else:
+            import multiprocessing as mp
+
+            ctx = mp.get_context("fork")
+            with ctx.Pool(jobs, initializer=_worker_init, initargs=(mesh_spec,), maxtasksperchild=200) as pool:
+                for rows in pool.imap_unordered(_work, runs, chunksize=1):
+                    _write_rows(csv_path, rows, "a")
+                    written += len(rows)
+                    bar.update(1)
+                    bar.set_postfix_str(f"{written / max(time.perf_counter() - start, 1e-9) * 60:.0f} evals/min")
+    return written, time.perf_counter() - start
+
+
+def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
+         side: bool = True) -> list[RunSpec]:
+    """Runs ordered so that partial results already span the grid (k and speed vary fastest)."""
+    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side)
+            for name in mesh_names for speed in speeds for k in ks]
+
+
+def run(args: argparse.Namespace) -> int:
+    from woody_sim import fillet_model
+
+    if args.lanes < 1 or args.jobs < 1:
+        print("woody sweep: --lanes and --jobs must be >= 1", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    mass = float(args.mass) if args.mass is not None else float(fillet_model.DEFAULT_TOTAL_MASS)
+    try:
+        names = list(_load_meshes(args.meshes))
+    except ValueError as exc:
+        print(f"woody sweep: {exc}", file=sys.stderr)
+        return 2
+    if not names:
+        print("woody sweep: no usable meshes", file=sys.stderr)
+        return 2
+    csv_path = out / CSV_FILE
+    done = completed_runs(csv_path, args.lanes)
+    runs = plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side)
+    todo = [r for r in runs if _key(r.mesh, r.k, r.speed_fpm, mass) not in done]
+    print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds = {len(runs)} runs "
+          f"({len(runs) - len(todo)} already in {csv_path}, {len(todo)} to go), {args.lanes} lanes, "
+          f"M = {mass:g} kg, {args.jobs} jobs", file=sys.stderr)
+    written, wall = run_grid(todo, args.meshes, min(args.jobs, max(1, len(todo))), csv_path)
+    meta = _update_meta(out / META_FILE, written, wall, args, len(names), mass)
+    if written:
+        print(f"woody sweep: {written} fillet evaluations in {wall:.1f} s = {written / wall * 60:.0f} /min",
+              file=sys.stderr)
+    if not args.no_report:
+        from woody_tools import results
+
+        md = results.build(out, meta, docs=Path(args.docs) if args.docs else None)
+        print(f"woody sweep: wrote {md}", file=sys.stderr)
+    return 0
+
+
+def _update_meta(path: Path, written: int, wall: float, args: argparse.Namespace, n_meshes: int, mass: float) -> dict:
+    meta = json.loads(path.read_text()) if path.exists() else {"invocations": []}
+    if written:
+        meta["invocations"].append({
+            "command": ("woody " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
+            if Path(sys.argv[0]).name == "woody" else "woody " + " ".join(shlex.quote(a) for a in _argv(args)),
+            "evaluations": written, "wall_s": round(wall, 2), "jobs": args.jobs, "cores": os.cpu_count(),
+            "meshes": args.meshes, "n_meshes": n_meshes, "mass": mass, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
+        })
+    meta["evaluations"] = sum(i["evaluations"] for i in meta["invocations"])
+    meta["wall_s"] = sum(i["wall_s"] for i in meta["invocations"])
+    path.write_text(json.dumps(meta, indent=2))
+    return meta
+
+
+def _argv(args: argparse.Namespace) -> list[str]:
+    out = ["sweep", "--meshes", args.meshes, "--k", ",".join(f"{k:g}" for k in args.k),
+           "--speeds", ",".join(f"{s:g}" for s in args.speeds), "--lanes", str(args.lanes),
+           "--jobs", str(args.jobs), "--out", str(args.out)]
+    if args.mass is not None:
+        out += ["--mass", f"{args.mass:g}"]
+    return out

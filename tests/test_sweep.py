@@ -1,0 +1,88 @@
+"""`woody sweep` end to end through the real CLI: rows, report, plots, resume, repair of a truncated runs.csv."""
+
+from __future__ import annotations
+
+import csv
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from woody_tools import results
+from woody_tools.experiment import RUN_COLUMNS
+
+MESHES = "generated:2:7"
+ARGS = ["sweep", "--meshes", MESHES, "--k", "0,100", "--speeds", "100", "--jobs", "2"]
+
+
+def _woody(*args: str) -> subprocess.CompletedProcess:
+    cmd = [sys.executable, "-c", "import sys; from woody_tools.cli import main; sys.exit(main(sys.argv[1:]))", *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+
+
+def _rows(path: Path) -> list[dict]:
+    with path.open(newline="") as fh:
+        reader = csv.DictReader(fh)
+        assert reader.fieldnames == RUN_COLUMNS
+        return list(reader)
+
+
+def test_sweep_cli_rows_report_resume(tmp_path):
+    out = tmp_path / "sweep"
+    first = _woody(*ARGS, "--out", str(out))
+    assert first.returncode == 0, first.stderr[-2000:]
+    rows = _rows(out / "runs.csv")
+    # 2 meshes x 2 k x 1 speed x 3 lanes
+    assert len(rows) == 12
+    keys = {(r["mesh"], float(r["k"]), float(r["speed_fpm"]), int(r["lane"])) for r in rows}
+    assert keys == {(m, k, 100.0, lane) for m in ("generated-70000", "generated-70001") for k in (0.0, 100.0)
+                    for lane in range(3)}
+    for r in rows:
+        assert r["status"] == "scored", r
+        assert math.isfinite(float(r["phi"])) and math.isfinite(float(r["hu_term"]))
+        side = [r[c] for c in ("nmdm", "mdm", "be")]
+        if int(r["lane"]) == 1:  # the side camera watches the centre lane
+            assert all(v != "" for v in side), r
+            assert 0.2 < float(r["nmdm"]) < 1.5
+        else:
+            assert all(v == "" for v in side), r
+    # stiff fillets keep their outline: lower Φ and higher NMDM than flexible ones
+    phi = {k: [float(r["phi"]) for r in rows if float(r["k"]) == k] for k in (0.0, 100.0)}
+    assert sum(phi[0.0]) / 6 > sum(phi[100.0]) / 6
+
+    md = (out / "results.md").read_text()
+    for heading in ("## Side view", "## Top view", "## Lanes", "## Targets", "## Throughput"):
+        assert heading in md
+    for paper_figure in ("0.520", "0.783", "19.12 ± 5.67", "5.40 ± 2.54", "19.06 ± 5.53", "5.28 ± 2.56"):
+        assert paper_figure in md
+    assert "evaluations/min" in md
+    assert "**PASS**" in md or "**MISS**" in md
+    for name in results.PLOTS:
+        assert (out / name).stat().st_size > 1000
+
+    # resumable: a second invocation runs nothing and leaves the rows alone
+    before = (out / "runs.csv").read_text()
+    second = _woody(*ARGS, "--out", str(out))
+    assert second.returncode == 0, second.stderr[-2000:]
+    assert "0 to go" in second.stderr
+    assert (out / "runs.csv").read_text() == before
+
+    # a truncated runs.csv (a killed sweep) is completed without duplicates
+    lines = before.splitlines(keepends=True)
+    (out / "runs.csv").write_text("".join(lines[:6]))  # header + 5 rows: one complete run, one partial
+    third = _woody(*ARGS, "--out", str(out))
+    assert third.returncode == 0, third.stderr[-2000:]
+    assert "3 to go" in third.stderr
+    again = _rows(out / "runs.csv")
+    assert len(again) == 12
+    assert {(r["mesh"], float(r["k"]), int(r["lane"])) for r in again} == {(m, k, lane) for m, k, _, lane in keys}
+
+
+def test_threshold_and_roc_helpers():
+    normal, severe = [15.0, 18.0, 20.0], [5.0, 7.0, 9.0]
+    t, bacc = results.best_threshold(normal, severe)
+    assert 9.0 < t < 15.0 and bacc == 1.0
+    assert results.roc(normal, severe)[2] == 1.0
+    assert results.accuracy(normal, severe, 8.0)[0] == pytest.approx(5 / 6)
