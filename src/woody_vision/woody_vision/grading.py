@@ -16,9 +16,9 @@ import math
 import numbers
 from dataclasses import dataclass
 
-DEFAULT_PHI_THRESHOLD = 8.72
+DEFAULT_PHI_THRESHOLD = 9.23
 """Binary cut set by `woody calibrate`: max balanced accuracy, normal k=0 vs severe k=100, calibration meshes
-generated:8:9, 100 and 130 FPM, 3 lanes, at the calibrated mass (docs/results.md)."""
+generated:24:9, 100 and 130 FPM, 3 lanes, at the calibrated mass (docs/results.md)."""
 
 LABEL_NORMAL = "normal"
 LABEL_WOODY = "woody"
