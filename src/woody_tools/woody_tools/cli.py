@@ -17,19 +17,23 @@ SUBCOMMANDS = [
 """(subcommand, module in woody_tools with add_arguments(parser) and run(args) -> int, help)."""
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser; with ``only``, just that subcommand's module is imported (pybullet stays unloaded for `report`)."""
     parser = argparse.ArgumentParser(prog="woody", description="Woody-breast grading line: run, record, replay, report.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, module_name, help_text in SUBCOMMANDS:
-        module = importlib.import_module(f"woody_tools.{module_name}")
         command = sub.add_parser(name, help=help_text)
-        module.add_arguments(command)
-        command.set_defaults(func=module.run)
+        if only is None or only == name:
+            module = importlib.import_module(f"woody_tools.{module_name}")
+            module.add_arguments(command)
+            command.set_defaults(func=module.run)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    only = argv[0] if argv and argv[0] in {name for name, _, _ in SUBCOMMANDS} else None
+    args = build_parser(only).parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
