@@ -196,10 +196,10 @@ class LineSim(Node):
                 next_top += self.top_period if want_top else 0.0
                 next_side += self.side_period if want_side else 0.0
                 next_clock = now + CLOCK_PERIOD
+                executor.spin_once(timeout_sec=0.0)  # serve /spawn_fillet between frames, not every step
             elif now >= next_clock:
                 self._publish_clock()
                 next_clock = now + CLOCK_PERIOD
-            executor.spin_once(timeout_sec=0.0)
             if self.realtime:
                 ahead = (now - sim_start) - (time.monotonic() - wall_start)
                 if ahead > 0.002:
