@@ -86,6 +86,17 @@ def mean_sd(values) -> tuple[float, float, int]:
     return float(a.mean()), float(a.std(ddof=1)) if a.size > 1 else 0.0, int(a.size)
 
 
+
+def _plot_beside_paper(ax, rows: Sequence[dict], speed: float, ks: Sequence[float], column: str,
+                       paper: dict | None, color) -> None:
+    """The project's mean ± sd of ``column`` per k at one speed, and the paper's first column as a dashed line."""
+    stats = [mean_sd(_select(rows, speed, k, column=column)) for k in ks]
+    ax.errorbar(ks, [s[0] for s in stats], yerr=[s[1] for s in stats], marker="o", capsize=3, color=color,
+                label=f"project {speed:g} FPM")
+    if paper:
+        pk = sorted(paper)
+        ax.plot(pk, [paper[k][0] for k in pk], "--", marker="x", color=color, alpha=0.6, label=f"paper {speed:g} FPM")
+
 def roc(normal: Sequence[float], severe: Sequence[float]) -> tuple[np.ndarray, np.ndarray, float]:
     """ROC of 'woody if Φ < t' (positive = severe): (false-positive rates, true-positive rates, AUC)."""
     n, s = finite(normal), finite(severe)
@@ -397,14 +408,7 @@ def _plots(rows, out: Path, speeds, ks, lanes, threshold: float) -> None:
     top_k = [k for k in ks if k <= 100.0] or ks
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     for speed in speeds:
-        stats = [mean_sd(_select(rows, speed, k)) for k in top_k]
-        ax.errorbar(top_k, [s[0] for s in stats], yerr=[s[1] for s in stats], marker="o", capsize=3,
-                    color=colors.get(speed), label=f"project {speed:g} FPM")
-        paper = PAPER_TOP.get(speed)
-        if paper:
-            pk = sorted(paper)
-            ax.plot(pk, [paper[k][0] for k in pk], "--", marker="x", color=colors.get(speed), alpha=0.6,
-                    label=f"paper {speed:g} FPM")
+        _plot_beside_paper(ax, rows, speed, top_k, "phi", PAPER_TOP.get(speed), colors.get(speed))
     ax.axhline(threshold, color="grey", lw=0.8, ls=":", label=f"threshold {threshold:g}")
     ax.set_xlabel("hinge stiffness k (N m/rad)")
     ax.set_ylabel("shape score Φ")
@@ -419,14 +423,7 @@ def _plots(rows, out: Path, speeds, ks, lanes, threshold: float) -> None:
     side = [r for r in rows if math.isfinite(r["nmdm"])]
     for speed in speeds:
         sk = sorted({r["k"] for r in side if math.isclose(r["speed_fpm"], speed)})
-        stats = [mean_sd(_select(side, speed, k, column="nmdm")) for k in sk]
-        ax.errorbar(sk, [s[0] for s in stats], yerr=[s[1] for s in stats], marker="o", capsize=3,
-                    color=colors.get(speed), label=f"project {speed:g} FPM")
-        paper = PAPER_SIDE.get(speed)
-        if paper:
-            pk = sorted(paper)
-            ax.plot(pk, [paper[k][0] for k in pk], "--", marker="x", color=colors.get(speed), alpha=0.6,
-                    label=f"paper {speed:g} FPM")
+        _plot_beside_paper(ax, side, speed, sk, "nmdm", PAPER_SIDE.get(speed), colors.get(speed))
     ax.axhspan(0.31, 0.51, color="green", alpha=0.08, label="physical normal 0.41 ± 0.10")
     ax.axhspan(0.58, 0.74, color="red", alpha=0.08, label="physical severe 0.66 ± 0.08")
     ax.set_xscale("symlog", linthresh=10)
