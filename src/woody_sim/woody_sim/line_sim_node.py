@@ -21,7 +21,7 @@ from std_msgs.msg import Header
 from woody_msgs.msg import FilletSpawn
 from woody_msgs.srv import SpawnFillet
 
-from woody_sim.fillet_model import DEFAULT_TOTAL_MASS
+from woody_sim.fillet_model import DEFAULT_TOTAL_MASS, MIN_STABLE_MASS
 from woody_sim.line_geometry import LineGeometry, fpm_to_mps
 from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
@@ -52,8 +52,9 @@ class LineSim(Node):
                                       "(0 = no limit).", 0.0, 1e6)
         spacing = declare(self, "spawn_spacing_m", 0.45, "Belt distance between fillets in a lane (m).", 0.25, 10.0)
         rate = declare(self, "fillets_per_minute", 0.0, "Spawn rate per lane; overrides spacing when > 0.", 0.0, 200.0)
-        self.mass = declare(self, "mass", DEFAULT_TOTAL_MASS, "Total mass M of a fillet's segment chain (kg); a "
-                            "tuning value set by `woody calibrate` (docs/results.md).", 0.01, 1000.0)
+        self.mass = declare(self, "mass", float(DEFAULT_TOTAL_MASS), "Total mass M of a fillet's segment chain (kg); "
+                            "a tuning value (docs/results.md); lighter chains blow up at the belt edge.",
+                            MIN_STABLE_MASS, 1000.0)
         damping = declare(self, "damping", 0.01, "Hinge damping c (N*m*s/rad).", 0.0, 10.0)
         segments = declare(self, "segments", 40, "Rigid segments N per fillet.", 2, 200)
         top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
@@ -185,6 +186,9 @@ class LineSim(Node):
             now = self.world.step()
             for fillet_id in self.world.take_removed():
                 self.renderer.remove_fillet(fillet_id)
+                if fillet_id in self.world.blown_up:
+                    self.get_logger().warning(f"fillet {fillet_id} removed: its chain blew up numerically at the "
+                                              "belt edge (known rare instability); it will be unscored")
             want_top = now + 1e-9 >= next_top
             want_side = self.side_period is not None and now + 1e-9 >= next_side
             if want_top or want_side:

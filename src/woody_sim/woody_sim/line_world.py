@@ -56,6 +56,8 @@ CONTACT_DISTANCE = 0.001
 PAST_ROLLER_X = 1.5
 """A fillet whose centre of mass is this far (m) downstream of the roller edge has left the line."""
 DYNAMIC_TIMEOUT = 10.0
+BLOWUP_SPEED = 12.0
+"""m/s no segment reaches on this line (free fall past the roller stays under ~4 m/s): faster is a numerical blow-up."""
 """A chain still on the line this long (s) after leaving the belt fast path is removed (stuck), so runs stay bounded."""
 
 
@@ -184,6 +186,8 @@ class LineWorld:
         self._client = p.connect(p.DIRECT)
         self._fillets: dict[int, _Fillet] = {}
         self._removed: list[int] = []
+        self.blown_up: list[int] = []
+        """Ids of fillets removed because their chain blew up numerically (a known, rare edge instability)."""
         self._models: dict[FilletMesh, FilletModel] = {}
         self._shapes: dict[FilletMesh, list[int]] = {}
         self._next_id = 0
@@ -492,7 +496,10 @@ class LineWorld:
         """Drop fillets that fell below ``remove_z``, left the line, got stuck or blew up (non-finite state)."""
         for fid, fillet in list(self._fillets.items()):
             state = fillet.state
-            if (
+            if np.isfinite(state).all() and np.abs(state[:, 7:10]).max() > BLOWUP_SPEED:
+                self.blown_up.append(fid)
+                self.remove(fid)
+            elif (
                 not np.isfinite(state).all()
                 or bool((state[:, 2] < self.geometry.remove_z).all())
                 or self._com(fillet)[0] > PAST_ROLLER_X

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from woody_sim.fillet_model import MIN_STABLE_MASS
 from woody_tools.experiment import RunSpec
 
 CALIBRATION_MESHES = "generated:8:9"
@@ -41,7 +42,8 @@ TEST_MESHES = "generated:8:8"
 TARGET_DELTA = 0.25
 DELTA_RANGE = (0.20, 0.32)
 NORMAL_RANGE = (0.42, 0.62)
-COARSE_MASSES = (2.5, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0)
+COARSE_MASSES = (10.0, 20.0, 40.0, 80.0, 160.0)
+"""From MIN_STABLE_MASS up: lighter chains blow up at the belt edge (fillet_model.MIN_STABLE_MASS)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -112,7 +114,7 @@ def search_mass(names: list[str], spec: str, masses: list[float], refine: int, j
         new = []
         for j in (best - 1, best + 1):  # geometric midpoints towards both neighbours
             if 0 <= j < len(ordered):
-                new.append(math.sqrt(ordered[best]["mass"] * ordered[j]["mass"]))
+                new.append(max(MIN_STABLE_MASS, math.sqrt(ordered[best]["mass"] * ordered[j]["mass"])))
         points += [_side_point(round(m, 2), names, spec, jobs) for m in new]
     best = min(points, key=lambda p: p["objective"])
     return float(best["mass"]), sorted(points, key=lambda p: p["mass"])
@@ -148,10 +150,19 @@ def run(args: argparse.Namespace) -> int:
     if overlap:
         print(f"woody calibrate: test meshes overlap the calibration meshes: {sorted(overlap)}", file=sys.stderr)
         return 2
+    if args.mass is not None and args.mass < MIN_STABLE_MASS:
+        print(f"woody calibrate: --mass {args.mass:g} is below the stable minimum {MIN_STABLE_MASS:g} kg "
+              "(the chain blows up at the belt edge)", file=sys.stderr)
+        return 2
     report: dict = {"calibration_meshes": args.meshes, "test_meshes": args.test_meshes, "started": time.ctime()}
     t0 = time.perf_counter()
     if args.mass is None:
         masses = [float(m) for m in args.masses.split(",") if m.strip()]
+        unstable = [m for m in masses if m < MIN_STABLE_MASS]
+        if unstable:
+            print(f"woody calibrate: masses {unstable} are below the stable minimum {MIN_STABLE_MASS:g} kg "
+                  "(the chain blows up at the belt edge)", file=sys.stderr)
+            return 2
         names = cal_names[: max(1, args.mass_meshes)]
         print(f"woody calibrate: mass search on {len(names)} meshes, side view, k 0/100, 100 FPM", file=sys.stderr)
         mass, points = search_mass(names, args.meshes, masses, args.refine, jobs)

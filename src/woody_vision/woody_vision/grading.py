@@ -16,7 +16,7 @@ import math
 import numbers
 from dataclasses import dataclass
 
-DEFAULT_PHI_THRESHOLD = 9.23
+DEFAULT_PHI_THRESHOLD = 11.02
 """Binary cut set by `woody calibrate`: max balanced accuracy, normal k=0 vs severe k=100, calibration meshes
 generated:24:9, 100 and 130 FPM, 3 lanes, at the calibrated mass (docs/results.md)."""
 
