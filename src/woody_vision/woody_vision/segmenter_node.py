@@ -111,7 +111,7 @@ class Segmenter(Node):
                 id=track.track_id, lane=max(track.lane, 0), centroid_u=float(blob.centroid[0]),
                 centroid_v=float(blob.centroid[1]), bbox_u=u, bbox_v=v, bbox_width=w, bbox_height=h,
                 area=float(blob.area_px), mean_height=float(blob.mean_height_m), age=track.age, unseen=track.unseen,
-                contour=Polygon(points=[Point32(x=float(x), y=float(y)) for x, y in blob.contour])))
+                contour=Polygon(points=[Point32(x=x, y=y) for x, y in blob.contour.astype(float).tolist()])))
         self.tracks_pub.publish(out)
         if self.debug_pub is not None:
             self._publish_debug(msg, update.active)
