@@ -82,7 +82,12 @@ def zhang_suen_thinning(mask: np.ndarray) -> np.ndarray:
 
 
 def bending_energy(mask: np.ndarray) -> float:
-    """BE = (P² / L) Σ κ² along a quadratic fit to the skeleton of a silhouette mask."""
+    """BE = (P² / L) Σ κ² along a quadratic fit to the skeleton of a silhouette mask.
+
+    P is the outer contour's perimeter, κ is evaluated at every skeleton pixel,
+    and L is the skeleton's pixel count (its length in px, close to the arc
+    length for a thin 8-connected chain), so BE ≈ P² · mean(κ²) is scale free.
+    """
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         return math.nan
