@@ -18,9 +18,6 @@ from pathlib import Path
 from woody_tools.graph import NodeProcess, lease_domain, wait_for
 from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
 
-DEFAULT_THRESHOLD = None
-"""None: the grader's own calibrated default is used and recorded in the report."""
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lanes", type=int, default=3, help="lanes across the belt, 1-6 (default 3)")
