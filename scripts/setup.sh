@@ -64,10 +64,10 @@ if ! is_current woody_msgs "$msgs"; then
 fi
 
 # 5. The Python packages, editable so source edits take effect at once.
-py=$(digest "$ROOT"/src/woody_sim/setup.py "$ROOT"/src/woody_vision/setup.py "$ROOT"/src/woody_tools/setup.py)
+py=$(digest "$ROOT"/src/woody_common/setup.py "$ROOT"/src/woody_sim/setup.py "$ROOT"/src/woody_vision/setup.py "$ROOT"/src/woody_tools/setup.py)
 if ! is_current python_packages "$py$ROOT"; then
-  log "installing woody_sim, woody_vision, woody_tools (editable)"
-  "${PIP[@]}" install --no-deps --no-build-isolation -e "$ROOT/src/woody_sim" -e "$ROOT/src/woody_vision" \
+  log "installing woody_common, woody_sim, woody_vision, woody_tools (editable)"
+  "${PIP[@]}" install --no-deps --no-build-isolation -e "$ROOT/src/woody_common" -e "$ROOT/src/woody_sim" -e "$ROOT/src/woody_vision" \
     -e "$ROOT/src/woody_tools" > "$STAMPS/pip-editable.log" 2>&1 || { cat "$STAMPS/pip-editable.log" >&2; exit 1; }
   mark python_packages "$py$ROOT"
 fi

@@ -68,10 +68,11 @@ def test_side_view_shows_roller_and_only_the_watched_lane(geometry, reference):
         assert np.abs(inside.astype(int) - outside).sum() > 30  # the roller disc ends ~R px from the axle
     renderer.add_fillet(0, geometry.watched_lane, visuals)
     renderer.add_fillet(1, 0, visuals)
-    watched = renderer.render_side({0: flat_poses(offsets, -0.3, geometry.lane_y(geometry.watched_lane)),
-                                    1: flat_poses(offsets, -0.3, geometry.lane_y(0))})
+    # the side view spans 0.41 m centred on the axle (0.431 mm/px): a fillet centred 0.1 m before the edge
+    watched = renderer.render_side({0: flat_poses(offsets, -0.1, geometry.lane_y(geometry.watched_lane)),
+                                    1: flat_poses(offsets, -0.1, geometry.lane_y(0))})
     other_only = renderer.render_side({0: flat_poses(offsets, -2.0, geometry.lane_y(geometry.watched_lane)),
-                                       1: flat_poses(offsets, -0.3, geometry.lane_y(0))})
+                                       1: flat_poses(offsets, -0.1, geometry.lane_y(0))})
     assert (np.abs(watched.astype(int) - empty.astype(int)).sum(axis=2) > 30).sum() > 1000
     assert np.array_equal(other_only, empty)
 

@@ -78,9 +78,10 @@ def test_passage_of_a_disc_gives_known_min_mdm_h_and_nmdm():
     assert m.stamp_of_min == pytest.approx((len(frames) - 1 - 7) * DT)  # the frame at the top of the roller
 
 
-def test_a_fillet_never_seen_flat_gives_no_measurement():
+def test_a_fillet_first_seen_past_the_h_trigger_gives_no_measurement():
+    """h is taken when the leading edge crosses axle + R; a fillet that enters already past it has no h."""
     tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
-    for i, a in enumerate(np.radians([10.0, 30.0, 50.0])):
+    for i, a in enumerate(np.radians([50.0, 70.0, 90.0])):
         tracker.update(with_disc((AXLE[0] + 70 * math.sin(a), AXLE[1] - 70 * math.cos(a)), 20.0), i * DT)
     assert flush(tracker, 1.0) == []
 
@@ -105,7 +106,8 @@ def test_draping_strip_has_lower_nmdm_than_a_rigid_one():
         (results[drape],) = flush(tracker, len(leads) * DT)
     rigid, draping = results[False], results[True]
     thickness = SideStrip(0.0).thickness_px
-    assert rigid.h_px == pytest.approx(thickness / 2, abs=1.0) and draping.h_px == pytest.approx(thickness / 2, abs=1.0)
+    assert rigid.h_px == pytest.approx(thickness / 2, abs=1.0)
+    assert thickness / 2 - 1.0 <= draping.h_px <= thickness, "h at the trigger: the drooping tip lowers the centroid"
     assert rigid.nmdm == pytest.approx(1.0, abs=0.03)  # a cantilever's centroid passes the roller top at R + t/2
     assert draping.nmdm < rigid.nmdm - 0.2
     assert draping.mdm_min_px < R + thickness / 2 - 10.0
@@ -186,5 +188,11 @@ def test_bending_energy_zero_for_straight_and_growing_with_curvature():
     assert all(b > 1.5 * a for a, b in zip(energies, energies[1:])), energies
     assert math.isnan(bending_energy(np.zeros((20, 20), np.uint8)))
     column = np.zeros((60, 20), np.uint8)
-    column[5:55, 10] = 255  # a vertical skeleton: y(x) cannot be fitted
-    assert math.isnan(bending_energy(column))
+    column[5:55, 10] = 255  # vertical: straight in its principal-axis frame
+    assert bending_energy(column) < 1e-6
+    bent = np.pad(strip_mask(0.005), 150)
+    h, w = bent.shape
+    turned = cv2.warpAffine(bent, cv2.getRotationMatrix2D((w / 2.0, h / 2.0), 35.0, 1.0), (w, h),
+                            flags=cv2.INTER_NEAREST)
+    assert bending_energy(turned) == pytest.approx(bending_energy(bent), rel=0.25), \
+        "BE follows the tilt only through P², whose pixel-chain perimeter grows up to ~10 % on a diagonal"

@@ -2,7 +2,8 @@
 
 Each of the N slices becomes one rigid body: its collision shape is the box
 bounding that slice, its mass is the total mass M shared in proportion to the
-slice's cross-section (height x width), and neighbours are hinged about the
+slice's actual volume (the paper shares it by the bounding box's height x
+width, which overweights tapering ends), and neighbours are hinged about the
 width axis (y) at their common face. The slice of the fillet surface is kept
 as the segment's visual, expressed in the segment's own frame, so a renderer
 that poses each piece with the physics bends the fillet continuously.
@@ -23,14 +24,8 @@ import numpy as np
 from woody_sim.meshes import FilletMesh, HeightMap
 
 DEFAULT_SEGMENTS = 40
-DEFAULT_TOTAL_MASS = 20.0
-"""Total chain mass M (kg), a tuning value like the paper's M = 100 (`woody calibrate`, docs/results.md).
-Lighter chains give a larger side-view ΔNMDM, but below MIN_STABLE_MASS the light tip segments make the
-hinge/drive coupling blow up at the belt edge, so the validated 20 kg stays the default."""
-
-MIN_STABLE_MASS = 10.0
-"""Lightest total mass (kg) at which the chain was seen to stay stable on the line (2.5 and 5 kg blew up:
-tests/test_physics.py::test_default_mass_stays_on_the_belt_in_a_full_line)."""
+NOMINAL_MASS = 1.0
+"""kg the geometry is built with; masses scale linearly, and LineWorld sets each fillet's calibrated M."""
 VISUAL_ROWS = 20
 """Points across the width in each visual cross-section."""
 VISUAL_STATIONS = 2
@@ -81,10 +76,25 @@ class FilletModel:
         return replace(self, masses=self.masses * (float(total_mass) / self.masses.sum()))
 
 
-def cross_section_masses(heights: np.ndarray, widths: np.ndarray, total_mass: float) -> np.ndarray:
-    """The paper's rule: m_i = M * h_i w_i / sum(h w)."""
-    area = np.asarray(heights, dtype=float) * np.asarray(widths, dtype=float)
-    return total_mass * area / area.sum()
+def slab_volumes(height_map: HeightMap, edges: np.ndarray) -> np.ndarray:
+    """(N,) volume (m^3) of the fillet between consecutive x ``edges``: the height map integrated per slab.
+
+    The paper shares M by each slice's bounding box (height x width); a tapering
+    end fills a small part of its box, so box shares overweight the tip. Here
+    each slab weighs what the fillet holds between its edges (a pixel column
+    split between two slabs is shared by overlap).
+    """
+    columns = height_map.heights.sum(axis=0) * height_map.pixel**2  # m^3 per pixel column
+    left = height_map.x0 - 0.5 * height_map.pixel + height_map.pixel * np.arange(columns.size)
+    cumulative = np.concatenate([[0.0], np.cumsum(columns)])
+    at = np.interp(edges, np.concatenate([left, [left[-1] + height_map.pixel]]), cumulative)
+    return np.diff(at)
+
+
+def volume_masses(volumes: np.ndarray, total_mass: float) -> np.ndarray:
+    """m_i = M * V_i / sum(V), with a floor of 1e-3 of the mean so no slab of a ragged end is massless."""
+    share = np.maximum(np.asarray(volumes, dtype=float), 1e-3 * float(np.mean(volumes)))
+    return total_mass * share / share.sum()
 
 
 def _section(height_map: HeightMap, x: float, rows: int) -> tuple[np.ndarray, np.ndarray]:
@@ -136,7 +146,7 @@ def _slab_visual(stations: list[tuple[float, np.ndarray, np.ndarray]], origin: n
 def build_fillet_model(
     fillet: FilletMesh,
     n_segments: int = DEFAULT_SEGMENTS,
-    total_mass: float = DEFAULT_TOTAL_MASS,
+    total_mass: float = NOMINAL_MASS,
     visual_rows: int = VISUAL_ROWS,
     visual_stations: int = VISUAL_STATIONS,
 ) -> FilletModel:
@@ -174,7 +184,7 @@ def build_fillet_model(
                 top = max(top, float(hm.sample(np.full(ys.size, x), ys).max()))
         centers[i] = (0.5 * (a + b), 0.5 * (y_lo + y_hi), 0.5 * top)
         half[i] = (0.5 * (b - a), 0.5 * (y_hi - y_lo), 0.5 * top)
-    masses = cross_section_masses(2.0 * half[:, 2], 2.0 * half[:, 1], float(total_mass))
+    masses = volume_masses(slab_volumes(hm, edges), float(total_mass))
     hinge_z = np.minimum(half[:-1, 2], half[1:, 2])
     joints = np.column_stack([edges[1:-1], 0.5 * (centers[:-1, 1] + centers[1:, 1]), hinge_z])
     visuals = []

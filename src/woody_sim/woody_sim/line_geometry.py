@@ -72,7 +72,8 @@ class LineGeometry:
 
     lanes: int = 3
     lane_pitch: float = 0.16
-    roller_radius: float = 0.05
+    roller_radius: float = 0.0207
+    """The seed system's end roller: 48 px at its side camera's 0.431 mm/px (seed-system.md, Cameras)."""
     belt_length: float = 1.4
     belt_margin: float = 0.08
     """Extra belt width beyond the outer lanes, each side."""
@@ -89,14 +90,18 @@ class LineGeometry:
     top_height_px: int = 376
     top_hfov: float = math.radians(85.0)
 
-    side_distance: float = 1.0
+    side_distance: float = 50.0
+    """The seed's side camera is orthographic; ours is a telephoto this far away (m), whose scale varies by
+    under 0.1 % across a fillet's width, so the image is orthographic to a fraction of a pixel."""
+    side_pixel: float = 0.30 / 696.0
+    """Side-camera pixel size at the watched lane (m): the seed's 0.30 m image height over 696 rows."""
     side_center_x: float = 0.0
-    side_center_z: float = -0.10
+    side_center_z: float | None = None
+    """Height of the side image centre (m); None centres it on the roller axle, as the seed does."""
     side_width: int = 960
     side_height_px: int = 696
     side_lane: int = -1
     """Lane the side camera watches; -1 means the centre lane."""
-    side_hfov: float = 2.0 * math.atan(480.0 / 960.0)
 
     extra: dict = field(default_factory=dict, compare=False)
 
@@ -144,8 +149,9 @@ class LineGeometry:
         )
 
     def side_camera(self) -> PinholeCamera:
-        fx = (self.side_width / 2.0) / math.tan(self.side_hfov / 2.0)
+        fx = self.side_distance / self.side_pixel
         y = self.lane_y(self.watched_lane) - self.side_distance
+        z = self.roller_axle[1] if self.side_center_z is None else self.side_center_z
         return PinholeCamera(
             width=self.side_width,
             height=self.side_height_px,
@@ -153,9 +159,9 @@ class LineGeometry:
             fy=fx,
             cx=self.side_width / 2.0,
             cy=self.side_height_px / 2.0,
-            position=(self.side_center_x, y, self.side_center_z),
+            position=(self.side_center_x, y, z),
             rotation=((1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, -1.0, 0.0)),
-            near=0.1,
+            near=self.side_distance - 1.0,
             far=self.side_distance + 1.0,
         )
 

@@ -21,9 +21,9 @@ from std_msgs.msg import Header
 from woody_msgs.msg import FilletSpawn
 from woody_msgs.srv import SpawnFillet
 
-from woody_sim.fillet_model import DEFAULT_TOTAL_MASS, MIN_STABLE_MASS
+from woody_common.calibration import load_calibration
 from woody_sim.line_geometry import LineGeometry, fpm_to_mps
-from woody_sim.line_world import LineWorld, PhysicsConfig
+from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.ros_params import declare, run_node
@@ -52,10 +52,14 @@ class LineSim(Node):
                                       "(0 = no limit).", 0.0, 1e6)
         spacing = declare(self, "spawn_spacing_m", 0.45, "Belt distance between fillets in a lane (m).", 0.25, 10.0)
         rate = declare(self, "fillets_per_minute", 0.0, "Spawn rate per lane; overrides spacing when > 0.", 0.0, 200.0)
-        self.mass = declare(self, "mass", float(DEFAULT_TOTAL_MASS), "Total mass M of a fillet's segment chain (kg); "
-                            "a tuning value (docs/results.md); lighter chains blow up at the belt edge.",
-                            MIN_STABLE_MASS, 1000.0)
-        damping = declare(self, "damping", 0.01, "Hinge damping c (N*m*s/rad).", 0.0, 10.0)
+        calibration = load_calibration()
+        self.mass = declare(self, "mass", calibration.total_mass_kg, "Total mass M of a fillet's segment chain (kg); "
+                            "a tuning value (config/calibration.yaml, docs/results.md).", 0.1, MAX_MASS)
+        damping = declare(self, "damping", calibration.hinge_damping, "Hinge damping c (N*m*s/rad).", 0.0, 10.0)
+        mu_static = declare(self, "friction_static", calibration.friction_static, "Coulomb cap of the belt drive "
+                            "while a segment holds the belt speed.", 0.0, 10.0)
+        mu_dynamic = declare(self, "friction_dynamic", calibration.friction_dynamic, "Coulomb cap of the belt drive "
+                             "once a segment slips.", 0.0, 10.0)
         segments = declare(self, "segments", 40, "Rigid segments N per fillet.", 2, 200)
         top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
         side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0, 400.0)
@@ -72,7 +76,8 @@ class LineSim(Node):
 
         self.speed = fpm_to_mps(speed_fpm)
         self.geometry = LineGeometry(lanes=lanes, side_lane=side_lane)
-        self.world = LineWorld(self.geometry, PhysicsConfig(n_segments=segments, damping=damping))
+        self.world = LineWorld(self.geometry, PhysicsConfig(
+            n_segments=segments, damping=damping, friction_static=mu_static, friction_dynamic=mu_dynamic)))
         meshes, errors = load_mesh_set(mesh_spec)
         for error in errors:
             self.get_logger().error(error)

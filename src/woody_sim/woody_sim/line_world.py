@@ -42,14 +42,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import pybullet as p
 
-from woody_sim.fillet_model import DEFAULT_SEGMENTS, DEFAULT_TOTAL_MASS, FilletModel, build_fillet_model
+from woody_common.calibration import Calibration, load_calibration
+from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
 from woody_sim.line_geometry import LineGeometry, fpm_to_mps
 from woody_sim.meshes import FilletMesh, generate_fillet
 
 MAX_SPEED_MPS = 5.0
 """Line speeds above this are rejected as a unit mistake (130 FPM is 0.66 m/s)."""
 MAX_MASS = 1000.0
-DEFAULT_DAMPING = 0.01
+DEFAULT_DAMPING = 0.05
+"""The seed's hinge damper in its side-view and combined scenes (the calibration may choose another)."""
 JOINT_LIMIT = math.radians(130.0)
 CONTACT_DISTANCE = 0.001
 """A conveyor contact counts as touching (for the drive) below this separation (m)."""
@@ -67,12 +69,6 @@ class PhysicsConfig:
 
     dt: float = 1.0 / 480.0
     """Seconds per :meth:`LineWorld.step` = one pybullet step (motors and drive update every step)."""
-    spring: str = "implicit"
-    """"implicit" (backward-Euler hinge torques, production) or "explicit" (tau = -k theta - c theta_dot
-    from the current state; stable only for a tiny dt, the validation reference)."""
-    drive_every: int = 1
-    """Recompute the belt drive every this many steps (lets the fine-step reference skip contact
-    queries); the force is re-applied every step in between."""
     n_segments: int = DEFAULT_SEGMENTS
     damping: float = DEFAULT_DAMPING
     """Hinge damping c (N m s / rad)."""
@@ -82,16 +78,16 @@ class PhysicsConfig:
     """The belt and roller are static bodies, so any friction would brake the fillet the real
     belt carries; the drive supplies the traction instead."""
     solver_iterations: int = 20
-    up_cosine: float = math.cos(math.radians(5.0))
-    """A conveyor contact drives its segment only if its normal is within 5 deg of straight up."""
+    friction_static: float = 0.8
+    """Coulomb cap of the belt drive while the segment holds the belt speed (seed: static 0.8)."""
+    friction_dynamic: float = 0.6
+    """Coulomb cap once the needed force exceeds the static cap (seed: dynamic 0.6)."""
+    normal_force_tau: float = 0.01
+    """Time constant (s) of the low-pass filter on the contact normal force that caps the drive."""
 
     def __post_init__(self) -> None:
         if not 1e-7 <= self.dt <= 0.02:
             raise ValueError(f"dt must be within 1e-7..0.02 s, got {self.dt}")
-        if self.spring not in ("implicit", "explicit"):
-            raise ValueError(f"spring must be 'implicit' or 'explicit', got {self.spring!r}")
-        if int(self.drive_every) != self.drive_every or self.drive_every < 1:
-            raise ValueError(f"drive_every must be an integer >= 1, got {self.drive_every}")
         if int(self.n_segments) != self.n_segments or self.n_segments < 2:
             raise ValueError(f"number of segments N must be an integer >= 2, got {self.n_segments}")
         if not self.damping >= 0.0:
@@ -126,12 +122,22 @@ class _Fillet:
     activation_time: float = math.inf
     state: np.ndarray = field(default_factory=lambda: np.zeros((0, 13)))
     """(N, 13) per segment after the last step: position, quaternion (x, y, z, w), linear and angular velocity."""
-    drive: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    """(N,) drive force along +x being applied (N)."""
+    drive: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """(N, 3) belt drive force on each segment being applied (N, world frame)."""
+    normal_force: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """(N,) low-pass filtered conveyor contact normal force on each segment (N), which caps the drive."""
     torque: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(N - 1,) hinge torques applied in the last step."""
     rate: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(N - 1,) hinge rates at the start of the last step."""
+
+
+def calibrated_config(calibration: Calibration | None = None, **overrides) -> PhysicsConfig:
+    """PhysicsConfig with the calibrated damper and drive friction (config/calibration.yaml), plus overrides."""
+    cal = calibration or load_calibration()
+    values = {"damping": cal.hinge_damping, "friction_static": cal.friction_static,
+              "friction_dynamic": cal.friction_dynamic}
+    return PhysicsConfig(**{**values, **overrides})
 
 
 def _check_positive_finite(name: str, value: float) -> float:
@@ -159,6 +165,25 @@ def _y_axes(q: np.ndarray) -> np.ndarray:
     """World direction of each frame's local +y axis, for (n, 4) quaternions (x, y, z, w)."""
     x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
     return np.column_stack([2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)])
+
+
+def _capped_drive(velocity: np.ndarray, normal: np.ndarray, speed: float, mass_rate: float, normal_force: float,
+                  cfg: PhysicsConfig) -> np.ndarray:
+    """The seed's drive force (3,) on one touching segment: m (V_line - v) / dt in the contact's tangent plane.
+
+    V_line is the belt velocity (``speed`` along +x) everywhere, as in the
+    seed: on the flat belt it is the belt's own motion; on the roller only its
+    projection on the tangent plane pulls, which shrinks as the roller curves
+    down, so a segment is let go by geometry, with no explicit release test.
+    ``normal`` is the conveyor's outward unit normal, ``mass_rate`` m / dt.
+    """
+    slip = velocity - np.array([speed, 0.0, 0.0])
+    slip -= slip.dot(normal) * normal
+    force = -mass_rate * slip
+    size = float(np.linalg.norm(force))
+    if size <= cfg.friction_static * normal_force:
+        return force
+    return force * (cfg.friction_dynamic * normal_force / size)
 
 
 def hinge_state(state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -243,7 +268,7 @@ class LineWorld:
     def model_for(self, mesh: FilletMesh) -> FilletModel:
         """The chain geometry for a mesh at this world's N (cached per mesh; masses for the default M)."""
         if mesh not in self._models:
-            self._models[mesh] = build_fillet_model(mesh, self.config.n_segments, DEFAULT_TOTAL_MASS)
+            self._models[mesh] = build_fillet_model(mesh, self.config.n_segments, NOMINAL_MASS)
         return self._models[mesh]
 
     def spawn(
@@ -278,7 +303,8 @@ class LineWorld:
         model = self.model_for(mesh).with_mass(mass)
         info = FilletInfo(fillet_id, int(lane), mesh.name, k, mass, speed, self.time)
         origin = np.array([self.geometry.spawn_x, lane_y, 0.0])
-        fillet = _Fillet(info=info, mesh=mesh, model=model, origin=origin, drive=np.zeros(model.n_segments))
+        fillet = _Fillet(info=info, mesh=mesh, model=model, origin=origin, drive=np.zeros((model.n_segments, 3)),
+                         normal_force=np.zeros(model.n_segments))
         self._fillets[fillet_id] = fillet
         self._kinematic_state(fillet)
         if self.config.activation_margin is None:
@@ -403,8 +429,7 @@ class LineWorld:
             if fillet.body < 0 and margin is not None and self._leading_x(fillet) >= -margin:
                 self._activate(fillet)
         dynamic = [f for f in self._fillets.values() if f.body >= 0]
-        if self._steps % cfg.drive_every == 0:
-            self._update_drive(dynamic)
+        self._update_drive(dynamic)
         for fillet in dynamic:
             self._apply(fillet)
         p.stepSimulation(physicsClientId=self._client)
@@ -420,20 +445,16 @@ class LineWorld:
 
     def _apply(self, fillet: _Fillet) -> None:
         """Hinge spring-damper and belt drive forces for the coming step."""
-        c, cfg = self._client, self.config
-        k, damping = fillet.info.k, cfg.damping
+        c = self._client
         theta, rate = hinge_state(fillet.state)
         joints = list(range(fillet.model.n_segments - 1))
-        if cfg.spring == "explicit":
-            torque = -k * theta - damping * rate
-        else:
-            torque = self._implicit_torque(fillet, theta, rate)
+        torque = self._implicit_torque(fillet, theta, rate)
         fillet.torque = torque
         fillet.rate = rate
         p.setJointMotorControlArray(fillet.body, joints, p.TORQUE_CONTROL, forces=torque.tolist(), physicsClientId=c)
-        for i in np.flatnonzero(fillet.drive):
+        for i in np.flatnonzero(fillet.drive.any(axis=1)):
             p.applyExternalForce(
-                fillet.body, int(i) - 1, [float(fillet.drive[i]), 0.0, 0.0], fillet.state[i, :3].tolist(),
+                fillet.body, int(i) - 1, fillet.drive[i].tolist(), fillet.state[i, :3].tolist(),
                 p.WORLD_FRAME, physicsClientId=c,
             )
 
@@ -463,22 +484,40 @@ class LineWorld:
         return np.linalg.solve(schur + dt * d * np.eye(len(theta)), rhs)
 
     def _update_drive(self, dynamic: list[_Fillet]) -> None:
-        """Paper's kinematic drive: F = m (V - v_x) / dt for segments on the flat belt, else 0."""
+        """The seed's belt drive on every touching segment (:func:`_capped_drive`), capped by Coulomb friction.
+
+        The force may not exceed mu_static N (else it slides at mu_dynamic N), N
+        being the segment's low-pass filtered contact normal force, so a segment
+        the roller no longer presses on gets no drive.
+        """
         by_body = {fillet.body: fillet for fillet in dynamic}
         for fillet in dynamic:
             fillet.drive[:] = 0.0
         if not dynamic:
             return
-        on_belt: set[tuple[int, int]] = set()
+        touching: dict[tuple[int, int], list[float]] = {}
         for contact in p.getContactPoints(bodyA=self._conveyor, physicsClientId=self._client):
-            # contact[7] is the normal on B (the fillet) pointing towards A (the conveyor): -z on the flat belt
-            if contact[2] in by_body and -contact[7][2] >= self.config.up_cosine and contact[8] < CONTACT_DISTANCE:
-                on_belt.add((contact[2], contact[4] + 1))
-        dt = self.config.dt * self.config.drive_every
-        for body, segment in on_belt:
+            if contact[2] in by_body and contact[8] < CONTACT_DISTANCE:
+                acc = touching.setdefault((contact[2], contact[4] + 1), [0.0, 0.0, 0.0])
+                n = contact[9]  # normal force (N); contact[7] points from the fillet to the conveyor
+                acc[0] -= n * contact[7][0]
+                acc[1] -= n * contact[7][2]
+                acc[2] += n
+        cfg = self.config
+        dt = cfg.dt
+        blend = min(1.0, dt / cfg.normal_force_tau)
+        for fillet in dynamic:
+            fillet.normal_force *= 1.0 - blend
+        for (body, segment), (nx, nz, force) in touching.items():
             fillet = by_body[body]
-            dv = fillet.info.speed_mps - fillet.state[segment, 7]
-            fillet.drive[segment] = fillet.model.masses[segment] * dv / dt
+            fillet.normal_force[segment] += blend * force
+            norm = math.hypot(nx, nz)
+            if norm <= 0.0:
+                continue
+            fillet.drive[segment] = _capped_drive(
+                fillet.state[segment, 7:10], np.array([nx / norm, 0.0, nz / norm]), fillet.info.speed_mps,
+                fillet.model.masses[segment] / dt, fillet.normal_force[segment], cfg,
+            )
 
     def _read_state(self, fillet: _Fillet) -> None:
         """One batched query for every link's pose and velocity (segment frames = centre-of-mass frames)."""
@@ -544,7 +583,8 @@ def benchmark_physics(
     """
     if n_fillets < 1 or seconds <= 0.0:
         raise ValueError("benchmark needs n_fillets >= 1 and seconds > 0")
-    world = LineWorld(config=config)
+    world = LineWorld(config=config or calibrated_config())
+    mass = load_calibration().total_mass_kg
     try:
         speed = fpm_to_mps(100.0)
         meshes = [generate_fillet(seed) for seed in range(3)]
@@ -559,7 +599,7 @@ def benchmark_physics(
         for _ in range(steps):
             for slot, when in list(pending.items()):
                 if world.time >= when:
-                    fid = world.spawn(meshes[slot % 3], stiffness[slot % 3], slot % lanes, DEFAULT_TOTAL_MASS, speed)
+                    fid = world.spawn(meshes[slot % 3], stiffness[slot % 3], slot % lanes, mass, speed)
                     slots[fid] = slot
                     del pending[slot]
             busy = len(world.fillets) == n_fillets and all(world.is_dynamic(fid) for fid in world.fillets)

@@ -12,7 +12,9 @@ SUBCOMMANDS = [
     ("report", "report_command", "rebuild report.md and plots from a bag or a verdicts.csv"),
     ("bench", "bench", "benchmarks: `woody bench sim` and `woody bench vision`"),
     ("sweep", "sweep", "the paper's drop-test grid (meshes x k x speed), parallel and resumable; runs.csv, results.md"),
-    ("calibrate", "calibrate", "tune the total mass M and the Φ threshold; writes them as the defaults"),
+    ("calibrate", "calibrate", "fit M, c and the drive friction to the paper's side view, choose the Φ threshold; "
+                               "writes config/calibration.yaml"),
+    ("soak", "soak", "physics soak: N fillet passages over the roller across k, mass, speed and lanes; blow-ups"),
 ]
 """(subcommand, module in woody_tools with add_arguments(parser) and run(args) -> int, help)."""
 

@@ -32,7 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from woody_sim.line_geometry import LineGeometry, fpm_to_mps
-from woody_sim.line_world import LineWorld, PhysicsConfig
+from woody_common.calibration import load_calibration
+from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
 from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer
 from woody_vision.camera_model import LaneLayout
@@ -50,8 +51,8 @@ SPAWN_X = -0.42
 TOP_RATE_HZ = 30.0
 TOP_START_X = -0.12
 """Top frames start once a fillet's leading end is this close to the roller edge (m; >= 7 frames before it at 130 FPM)."""
-SIDE_RATE_HZ = 100.0
-SIDE_FAR_RATE_HZ = 8.0
+SIDE_RATE_HZ = 200.0
+SIDE_FAR_RATE_HZ = 20.0
 SIDE_DONE_DISTANCE = 0.12
 """The side passage is closed once the watched fillet's centre of mass is below the axle and this far (m) from it:
 the centroid only moves away from the axle from then on (it falls), so no later frame can lower the MDM."""
@@ -99,9 +100,10 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     """
     geometry = LineGeometry(lanes=spec.lanes, spawn_x=SPAWN_X)
     renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side)
-    world = LineWorld(geometry, config or PhysicsConfig())
+    calibration = load_calibration()
+    world = LineWorld(geometry, config or calibrated_config(calibration))
     speed = fpm_to_mps(spec.speed_fpm)
-    mass = spec.mass if spec.mass is not None else _default_mass()
+    mass = spec.mass if spec.mass is not None else calibration.total_mass_kg
     results: dict[int, dict] = {}
     side_result = None
     n_top = n_side = 0
@@ -188,9 +190,3 @@ def _shape_row(graded) -> dict:
     shape = graded.shape
     return {"phi": float(shape.phi), "hu_term": float(shape.hu_term), "solidity_term": float(shape.solidity_term),
             "status": shape.status, "reason": shape.reason}
-
-
-def _default_mass() -> float:
-    from woody_sim import fillet_model
-
-    return fillet_model.DEFAULT_TOTAL_MASS

@@ -2,17 +2,21 @@
 
 Per frame: the fillet's silhouette by background subtraction, its centroid
 C_t from image moments and MDM_t = |C_t − roller axle| (px). Per fillet
-passage: NMDM = min_t MDM_t / (R + h), with R the roller radius and h the
-vertical distance from the centroid to the silhouette's top while the fillet
-is still flat on the belt (px), and BE = (P² / L) Σ κ² of a quadratic fit
-y = a x² + b x + c to the silhouette's skeleton (Zhang–Suen thinning), taken
-at the frame of minimum MDM, where the fillet bends most over the roller.
+passage, as the paper's own evaluator does it (seed-system.md): NMDM =
+min_t MDM_t / (R + h), with R the roller radius and h the vertical distance
+from the centroid to the silhouette's topmost row, measured once, in the first
+frame whose leading edge reaches the axle column + R; BE = (P² / L) Σ κ² of a
+quadratic fit y = a x² + b x + c to the silhouette's skeleton (Zhang–Suen
+thinning) in the silhouette's principal-axis frame, with P the contour
+perimeter and L the fitted parabola's arc length, kept as the maximum over the
+frames from that trigger on (the bend over the roller; flat frames have
+κ ≈ 0 and cannot hold the maximum).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -58,47 +62,75 @@ def nmdm(min_mdm_px: float, roller_radius_px: float, h_px: float) -> float:
     return min_mdm_px / (roller_radius_px + h_px)
 
 
+def _zhang_suen_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Per sub-iteration, which 8-neighbourhood codes remove the centre pixel (Zhang & Suen 1984).
+
+    Bit i of a code is neighbour P(i + 2), clockwise from north (P2 .. P9).
+    """
+    tables = np.zeros((2, 256), bool)
+    for code in range(256):
+        p = [(code >> i) & 1 for i in range(8)]  # P2..P9
+        neighbours = sum(p)
+        transitions = sum(p[i] == 0 and p[(i + 1) % 8] == 1 for i in range(8))
+        p2, p4, p6, p8 = p[0], p[2], p[4], p[6]
+        base = 2 <= neighbours <= 6 and transitions == 1
+        tables[0, code] = base and p2 * p4 * p6 == 0 and p4 * p6 * p8 == 0
+        tables[1, code] = base and p2 * p4 * p8 == 0 and p2 * p6 * p8 == 0
+    return tables
+
+
+_ZS_TABLES = _zhang_suen_tables()
+_ZS_KERNEL = np.array([[128, 1, 2], [64, 0, 4], [32, 16, 8]], np.float32)
+"""Weights that turn the 8 neighbours (P2 north, clockwise) into a code; filter2D correlates, no flip."""
+
+
 def zhang_suen_thinning(mask: np.ndarray) -> np.ndarray:
-    """One-pixel-wide skeleton (bool) of a binary mask, by vectorised Zhang–Suen thinning."""
+    """One-pixel-wide skeleton (bool) of a binary mask, by Zhang–Suen thinning with a neighbourhood lookup."""
     img = np.pad((np.asarray(mask) > 0).astype(np.uint8), 1)
     while True:
         changed = False
-        for step in (0, 1):
-            p = [img[1:-1, 1:-1], img[:-2, 1:-1], img[:-2, 2:], img[1:-1, 2:], img[2:, 2:], img[2:, 1:-1],
-                 img[2:, :-2], img[1:-1, :-2], img[:-2, :-2]]  # P1 and its neighbours P2..P9 clockwise from north
-            neighbours = sum(p[1:]).astype(np.int32)
-            ring = p[1:] + [p[1]]
-            transitions = sum(((ring[i] == 0) & (ring[i + 1] == 1)).astype(np.int32) for i in range(8))
-            if step == 0:
-                c1, c2 = p[1] * p[3] * p[5], p[3] * p[5] * p[7]
-            else:
-                c1, c2 = p[1] * p[3] * p[7], p[1] * p[5] * p[7]
-            remove = (p[0] == 1) & (neighbours >= 2) & (neighbours <= 6) & (transitions == 1) & (c1 == 0) & (c2 == 0)
+        for table in _ZS_TABLES:
+            codes = cv2.filter2D(img, cv2.CV_32F, _ZS_KERNEL, borderType=cv2.BORDER_CONSTANT).astype(np.uint8)
+            remove = (img == 1) & table[codes]
             if remove.any():
-                img[1:-1, 1:-1][remove] = 0
+                img[remove] = 0
                 changed = True
         if not changed:
             return img[1:-1, 1:-1].astype(bool)
 
 
-def bending_energy(mask: np.ndarray) -> float:
-    """BE = (P² / L) Σ κ² along a quadratic fit to the skeleton of a silhouette mask.
+def principal_axis_points(mask: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(n, 2) points (x, y) turned into the mask's principal-axis frame (x along its long axis)."""
+    m = cv2.moments(mask, binaryImage=True)
+    angle = 0.5 * math.atan2(2.0 * m["mu11"], m["mu20"] - m["mu02"])
+    c, s = math.cos(angle), math.sin(angle)
+    centred = points - np.array([m["m10"] / m["m00"], m["m01"] / m["m00"]])
+    return centred @ np.array([[c, -s], [s, c]])
 
-    P is the outer contour's perimeter, κ is evaluated at every skeleton pixel,
-    and L is the skeleton's pixel count (its length in px, close to the arc
-    length for a thin 8-connected chain), so BE ≈ P² · mean(κ²) is scale free.
+
+def bending_energy(mask: np.ndarray) -> float:
+    """BE = (P² / L) Σ κ² along a quadratic fit to the skeleton of a silhouette mask (the seed's procedure).
+
+    The skeleton is turned into the silhouette's principal-axis frame and
+    fitted with y = a x² + b x + c; κ is the fit's curvature at every skeleton
+    pixel, P the outer contour's perimeter and L the fitted parabola's arc
+    length over the skeleton's extent.
     """
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
         return math.nan
     perimeter = cv2.arcLength(max(contours, key=cv2.contourArea), True)
-    skeleton = zhang_suen_thinning(mask)
-    ys, xs = np.nonzero(skeleton)
-    if xs.size < 3 or np.ptp(xs) == 0:
+    ys, xs = np.nonzero(zhang_suen_thinning(mask))
+    if xs.size < 3:
         return math.nan
-    a, b, _ = np.polyfit(xs.astype(float), ys.astype(float), 2)
-    kappa = 2.0 * abs(a) / (1.0 + (2.0 * a * xs + b) ** 2) ** 1.5
-    return float(perimeter**2 / xs.size * np.sum(kappa**2))
+    pts = principal_axis_points(mask, np.column_stack([xs, ys]).astype(float))
+    if np.ptp(pts[:, 0]) == 0:
+        return math.nan
+    a, b, _ = np.polyfit(pts[:, 0], pts[:, 1], 2)
+    kappa = 2.0 * abs(a) / (1.0 + (2.0 * a * pts[:, 0] + b) ** 2) ** 1.5
+    grid = np.linspace(pts[:, 0].min(), pts[:, 0].max(), 256)
+    length = float(np.trapezoid(np.sqrt(1.0 + (2.0 * a * grid + b) ** 2), grid))
+    return float(perimeter**2 / length * np.sum(kappa**2))
 
 
 @dataclass
@@ -111,7 +143,9 @@ class _Passage:
     h_px: float = math.nan
     min_mdm: float = math.inf
     stamp_of_min: float = 0.0
-    mask_at_min: np.ndarray | None = field(default=None, repr=False)
+    be: float = math.nan
+    approached: bool = False
+    """Seen with its leading edge short of the h trigger, so the trigger frame is a real crossing."""
 
 
 class SidePassageTracker:
@@ -170,22 +204,22 @@ class SidePassageTracker:
         passage.centroid, passage.last_stamp, passage.unseen = (u, v), stamp, 0
         passage.frames += 1
         x, y, w, h = (int(s) for s in stat[:4])
-        if x + w < self.axle[0] - self.radius:  # wholly on the flat belt: measure h
-            column = mask[y:y + h, min(max(int(round(u)), x), x + w - 1)]
-            rows = np.flatnonzero(column)
-            if rows.size:
-                passage.h_px = v - (y + rows[0])
+        reached = x + w - 1 >= self.axle[0] + self.radius  # the seed's h trigger: leading edge at axle + R
+        if reached and passage.approached and math.isnan(passage.h_px):
+            passage.h_px = v - y
+        passage.approached |= not reached
         distance = mdm((u, v), self.axle)
         if distance < passage.min_mdm:
             passage.min_mdm, passage.stamp_of_min = distance, stamp
-            passage.mask_at_min = mask[y:y + h, x:x + w].astype(np.uint8) * 255
+        if math.isfinite(passage.h_px):
+            be = bending_energy(np.pad(mask[y:y + h, x:x + w].astype(np.uint8) * 255, 1))
+            passage.be = max(passage.be, be) if math.isfinite(passage.be) else be
 
     def _measure(self, passage: _Passage) -> SideMeasurement | None:
-        if passage.mask_at_min is None or not math.isfinite(passage.h_px):
-            return None  # never seen flat on the belt (entered mid-fall, or a speck): no reliable h
-        be = bending_energy(np.pad(passage.mask_at_min, 1))
+        if not math.isfinite(passage.h_px) or passage.h_px <= 0.0:
+            return None  # never seen reaching the roller (entered mid-fall, or a speck): no reliable h
         return SideMeasurement(nmdm=nmdm(passage.min_mdm, self.radius, passage.h_px), mdm_min_px=passage.min_mdm,
-                               be=be, h_px=passage.h_px, stamp_of_min=passage.stamp_of_min,
+                               be=passage.be, h_px=passage.h_px, stamp_of_min=passage.stamp_of_min,
                                first_stamp=passage.first_stamp, last_stamp=passage.last_stamp, frames=passage.frames)
 
 
