@@ -72,6 +72,17 @@ class RunSpec:
     mass: float | None = None
     side: bool = True
     top: bool = True
+    damping: float | None = None
+    """Hinge damper c; None = the calibrated one (config/calibration.yaml)."""
+    friction_static: float | None = None
+    """Drive friction cap (mu_dynamic keeps the seed's 0.75 ratio); None = the calibrated one."""
+
+    def physics_overrides(self) -> dict:
+        """PhysicsConfig fields this run sets itself (the rest come from the calibration)."""
+        out = {} if self.damping is None else {"damping": self.damping}
+        if self.friction_static is not None:
+            out.update(friction_static=self.friction_static, friction_dynamic=0.75 * self.friction_static)
+        return out
 
     @property
     def key(self) -> tuple[str, float, float, float | None]:
@@ -101,7 +112,7 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     geometry = LineGeometry(lanes=spec.lanes, spawn_x=SPAWN_X)
     renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side)
     calibration = load_calibration()
-    world = LineWorld(geometry, config or calibrated_config(calibration))
+    world = LineWorld(geometry, config or calibrated_config(calibration, **spec.physics_overrides()))
     speed = fpm_to_mps(spec.speed_fpm)
     mass = spec.mass if spec.mass is not None else calibration.total_mass_kg
     results: dict[int, dict] = {}

@@ -179,7 +179,7 @@ def _pf(ok: bool | None) -> str:
 
 def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path:
     """Write out/results.md and out/*.png from out/runs.csv; with ``docs`` also docs/results.md + docs/results/."""
-    from woody_vision.grading import DEFAULT_PHI_THRESHOLD
+    from woody_common.calibration import load_calibration
 
     out = Path(out)
     rows = load_rows(out / "runs.csv")
@@ -189,7 +189,7 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
     lanes = sorted({r["lane"] for r in rows})
     meshes = sorted({r["mesh"] for r in rows})
     masses = sorted({r["mass"] for r in rows if math.isfinite(r["mass"])})
-    threshold = float(DEFAULT_PHI_THRESHOLD)
+    threshold = load_calibration().phi_threshold
     side_rows = [r for r in rows if math.isfinite(r["nmdm"])]
 
     _plots(rows, out, speeds, ks, lanes, threshold)
@@ -199,7 +199,7 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
              f"{len(rows)} fillet rows ({sum(r['status'] == 'scored' for r in rows)} with a scored Φ, "
              f"{len(side_rows)} with side-view metrics). Total mass M = "
              f"{', '.join(f'{m:g}' for m in masses)} kg; Φ threshold {threshold:g} "
-             "(`woody_vision.grading.DEFAULT_PHI_THRESHOLD`).\n")
+             "(`config/calibration.yaml`).\n")
     invocations = meta.get("invocations", [])
     if invocations:
         L.append("Command line(s) that produced `runs.csv` (wall time on this machine):\n")

@@ -58,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: cores)")
     parser.add_argument("--out", default="sweep-out", help="output folder (runs.csv, results.md, *.png)")
     parser.add_argument("--mass", type=float, default=None,
-                        help="total chain mass M in kg (default: the calibrated fillet_model.DEFAULT_TOTAL_MASS)")
+                        help="total chain mass M in kg (default: the calibrated one, config/calibration.yaml)")
     parser.add_argument("--no-side", action="store_true", help="skip the side view (top-down Φ only)")
     parser.add_argument("--no-report", action="store_true", help="only run; do not rebuild results.md and plots")
     parser.add_argument("--docs", default=None, metavar="DIR",
@@ -184,14 +184,14 @@ def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int
 
 
 def run(args: argparse.Namespace) -> int:
-    from woody_sim import fillet_model
+    from woody_common.calibration import load_calibration
 
     if args.lanes < 1 or args.jobs < 1:
         print("woody sweep: --lanes and --jobs must be >= 1", file=sys.stderr)
         return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    mass = float(args.mass) if args.mass is not None else float(fillet_model.DEFAULT_TOTAL_MASS)
+    mass = float(args.mass) if args.mass is not None else load_calibration().total_mass_kg
     try:
         names = list(_load_meshes(args.meshes))
     except ValueError as exc:

@@ -21,10 +21,11 @@ from sensor_msgs.msg import CameraInfo, Image
 from woody_msgs.msg import FilletTrackArray, FilletVerdict
 
 from woody_sim.ros_params import declare, run_node
+from woody_common.calibration import load_calibration
 from woody_vision.camera_model import edge_row
 from woody_vision.frame_checks import FrameChecker, FrameError, image_to_array
 from woody_vision.grader_core import FilletGrader, GradedFillet, TrackObservation
-from woody_vision.grading import DEFAULT_PHI_THRESHOLD, GradingRules
+from woody_vision.grading import GradingRules
 from woody_vision.side_view import SidePassageTracker
 
 LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY, "unscored": FilletVerdict.CLASS_UNSCORED}
@@ -35,7 +36,7 @@ class Grader(Node):
 
     def __init__(self) -> None:
         super().__init__("grader")
-        threshold = declare(self, "threshold", DEFAULT_PHI_THRESHOLD, "Φ below this is woody (stiff fillets deform "
+        threshold = declare(self, "threshold", load_calibration().phi_threshold, "Φ below this is woody (stiff fillets deform "
                             "less); the default is the calibrated one.", 0.001, 1000.0)
         moderate = declare(self, "moderate_threshold", 0.0, "Φ below this grades at least moderate (0 = threshold).",
                            0.0, 1000.0)
@@ -57,7 +58,7 @@ class Grader(Node):
                                  "measurement (s).", 0.0, 10.0)
         self.side_options = dict(
             axle_px=(declare(self, "roller_axle_u", 480.0, "Roller axle column in the side image (px).", -1e4, 1e4),
-                     declare(self, "roller_axle_v", 300.0, "Roller axle row in the side image (px).", -1e4, 1e4)),
+                     declare(self, "roller_axle_v", 348.0, "Roller axle row in the side image (px).", -1e4, 1e4)),
             roller_radius_px=declare(self, "roller_radius_px", 48.0, "Roller radius in the side image (px).", 1.0, 1e4),
         )
         if side_lane >= lanes:

@@ -16,10 +16,6 @@ import math
 import numbers
 from dataclasses import dataclass
 
-DEFAULT_PHI_THRESHOLD = 11.02
-"""Binary cut set by `woody calibrate`: max balanced accuracy, normal k=0 vs severe k=100, calibration meshes
-generated:24:9, 100 and 130 FPM, 3 lanes, at the calibrated mass (docs/results.md)."""
-
 LABEL_NORMAL = "normal"
 LABEL_WOODY = "woody"
 GRADE_NORMAL = "normal"
@@ -41,7 +37,8 @@ class Classification:
 class GradingRules:
     """Thresholds on Φ; validated on construction."""
 
-    threshold: float = DEFAULT_PHI_THRESHOLD
+    threshold: float
+    """The binary cut; the calibrated one is in config/calibration.yaml (`woody calibrate`)."""
     moderate_threshold: float | None = None
     severe_threshold: float | None = None
 
