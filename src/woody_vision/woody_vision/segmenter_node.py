@@ -8,11 +8,11 @@ line so a camera hiccup never takes the node down or corrupts its tracks.
 
 from __future__ import annotations
 
+import array
 import sys
 
 import cv2
 import numpy as np
-from geometry_msgs.msg import Point32, Polygon
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
@@ -111,7 +111,7 @@ class Segmenter(Node):
                 id=track.track_id, lane=max(track.lane, 0), centroid_u=float(blob.centroid[0]),
                 centroid_v=float(blob.centroid[1]), bbox_u=u, bbox_v=v, bbox_width=w, bbox_height=h,
                 area=float(blob.area_px), mean_height=float(blob.mean_height_m), age=track.age, unseen=track.unseen,
-                contour=Polygon(points=[Point32(x=x, y=y) for x, y in blob.contour.astype(float).tolist()])))
+                contour_uv=array.array("i", blob.contour.astype(np.int32).tobytes())))
         self.tracks_pub.publish(out)
         if self.debug_pub is not None:
             self._publish_debug(msg, update.active)
