@@ -27,6 +27,7 @@ from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.ros_params import declare, run_node
+from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
 
 TOP_FRAME = "top_camera_optical_frame"
@@ -59,6 +60,8 @@ class LineSim(Node):
         segments = declare(self, "segments", 40, "Rigid segments N per fillet.", 2, 200)
         top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
         side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0, 400.0)
+        side_idle = declare(self, "side_idle_rate_hz", 2.0, "Side frame rate while no fillet of the watched lane "
+                            "is in its view (frames just after one leaves go at side_rate_hz).", 0.1, 400.0)
         side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
         self.realtime = declare(self, "realtime", False, "Pace the simulation to the wall clock.")
         self.duration = declare(self, "duration_s", 0.0, "Exit after this much sim time (0 = run until stopped).",
@@ -85,6 +88,7 @@ class LineSim(Node):
         self.spawned = 0
         self.top_period = 1.0 / top_rate
         self.side_period = 1.0 / side_rate if side_rate > 0 else None
+        self.side_gate = SideFrameGate(idle_period_s=1.0 / side_idle)
         self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
 
         latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -190,15 +194,19 @@ class LineSim(Node):
                     self.get_logger().warning(f"fillet {fillet_id} removed: its chain blew up numerically at the "
                                               "belt edge (known rare instability); it will be unscored")
             want_top = now + 1e-9 >= next_top
-            want_side = self.side_period is not None and now + 1e-9 >= next_side
+            want_side, poses = False, None
+            if self.side_period is not None and now + 1e-9 >= next_side:
+                poses = self.world.segment_poses()
+                want_side = self.side_gate.take(self.renderer.side_view_occupied(poses), now)
+                next_side += self.side_period
             if want_top or want_side:
                 if pending_stamp is not None:
                     self._publish_frames(self.renderer.collect(copy=False), pending_stamp)
                 self._publish_clock()
-                self.renderer.submit(self.world.segment_poses(), want_top=want_top, want_side=want_side)
+                self.renderer.submit(poses if poses is not None else self.world.segment_poses(), want_top=want_top,
+                                     want_side=want_side)
                 pending_stamp = now
                 next_top += self.top_period if want_top else 0.0
-                next_side += self.side_period if want_side else 0.0
                 next_clock = now + CLOCK_PERIOD
                 executor.spin_once(timeout_sec=0.0)  # serve /spawn_fillet between frames, not every step
             elif now >= next_clock:

@@ -209,18 +209,16 @@ def _prepare_fillet(
     maxn = max(v.shape[0] for v, _ in visuals)
     verts = np.zeros((n, maxn, 3))
     faces = []
-    radius = np.zeros(n)
     for i, (v, f) in enumerate(visuals):
         verts[i, : v.shape[0]] = v
         faces.append(f + i * maxn)
-        radius[i] = float(np.sqrt((v * v).sum(axis=1).max()))
     faces_arr = np.concatenate(faces, axis=0) if faces else np.zeros((0, 3), np.int64)
     if color is None:
         color = fillet_color(fillet_id)
     c = np.asarray(color, dtype=np.float64)
     if c.shape != (3,) or np.any(c < 0) or np.any(c > 255):
         raise ValueError(f"add_fillet: color must be three ints 0..255, got {color!r}")
-    return _PreparedFillet(int(fillet_id), int(lane), n, verts, faces_arr, radius, c)
+    return _PreparedFillet(int(fillet_id), int(lane), n, verts, faces_arr, _segment_radii(visuals), c)
 
 
 class _View:
@@ -424,7 +422,7 @@ class LineRenderer:
             if lane is not None and fl.lane != lane:
                 continue
             t_opt = (pose[:, :3] - view.pos) @ view.rot  # link origins in the optical frame
-            if not _in_view(view, t_opt, fl.seg_radius):
+            if not _in_view(view.camera, t_opt, fl.seg_radius):
                 continue
             m = np.matmul(view.rot.T[None, :, :], quaternions_to_matrices(pose[:, 3:7]))  # link -> optical
             view.zbuffer.draw(fl.verts, fl.faces, m, t_opt, len(colors))
@@ -433,21 +431,27 @@ class LineRenderer:
             view.zbuffer.compose(np.array(colors), rgb, depth)
 
 
-def _in_view(view: _View, t_opt: np.ndarray, radius: np.ndarray) -> bool:
+def _in_view(camera: PinholeCamera, t_opt: np.ndarray, radius: np.ndarray) -> bool:
+    """Whether any segment's bounding sphere (centres ``t_opt`` in the optical frame) may show in the image."""
     z = t_opt[:, 2]
-    if np.all(z + radius < view.near):
+    if np.all(z + radius < camera.near):
         return False
-    zn = np.maximum(z - radius, view.near)
-    zf = np.maximum(z + radius, view.near)
+    zn = np.maximum(z - radius, camera.near)
+    zf = np.maximum(z + radius, camera.near)
     # Conservative pixel extent of each segment's bounding sphere.
-    us = [view.fx * (t_opt[:, 0] + sx * radius) / zz for sx in (-1, 1) for zz in (zn, zf)]
-    vs = [view.fy * (t_opt[:, 1] + sy * radius) / zz for sy in (-1, 1) for zz in (zn, zf)]
-    u0 = np.min(us, axis=0) + view.cx
-    u1 = np.max(us, axis=0) + view.cx
-    v0 = np.min(vs, axis=0) + view.cy
-    v1 = np.max(vs, axis=0) + view.cy
-    vis = (u1 >= -1) & (u0 <= view.w) & (v1 >= -1) & (v0 <= view.h)
+    us = [camera.fx * (t_opt[:, 0] + sx * radius) / zz for sx in (-1, 1) for zz in (zn, zf)]
+    vs = [camera.fy * (t_opt[:, 1] + sy * radius) / zz for sy in (-1, 1) for zz in (zn, zf)]
+    u0 = np.min(us, axis=0) + camera.cx
+    u1 = np.max(us, axis=0) + camera.cx
+    v0 = np.min(vs, axis=0) + camera.cy
+    v1 = np.max(vs, axis=0) + camera.cy
+    vis = (u1 >= -1) & (u0 <= camera.width) & (v1 >= -1) & (v0 <= camera.height)
     return bool(vis.any())
+
+
+def _segment_radii(visuals: Sequence[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """Bounding radius of each segment about its link origin."""
+    return np.array([float(np.sqrt((v * v).sum(axis=1).max())) for v, _ in visuals])
 
 
 def _validate_add(
@@ -564,6 +568,8 @@ class RenderProcess:
         self._flags = (bool(render_top), bool(render_side))
         self._known: dict[int, int] = {}  # id -> n_segments
         self._lanes: dict[int, int] = {}
+        self._radii: dict[int, np.ndarray] = {}
+        self._side_camera = geometry.side_camera()
         self._inflight: tuple[bool, bool] | None = None
         self._timeout = float(timeout)
         self.last_render_s: tuple[float, float] = (0.0, 0.0)
@@ -654,6 +660,7 @@ class RenderProcess:
         self._send(("add", fid, lane_i, vis, None if color is None else tuple(int(c) for c in color)))
         self._known[fid] = len(vis)
         self._lanes[fid] = lane_i
+        self._radii[fid] = _segment_radii(vis)
 
     def remove_fillet(self, fillet_id: int) -> None:
         try:
@@ -664,6 +671,18 @@ class RenderProcess:
         self._send(("remove", fid))
         del self._known[fid]
         del self._lanes[fid]
+        del self._radii[fid]
+
+    def side_view_occupied(self, poses: Mapping[int, np.ndarray]) -> bool:
+        """Whether a fillet of the watched lane may show in the side camera's image (else the frame is the
+        static background, which a consumer has seen already)."""
+        cam = self._side_camera
+        rot, pos = np.asarray(cam.rotation, dtype=np.float64), np.asarray(cam.position, dtype=np.float64)
+        for fid, pose in poses.items():
+            if self._lanes.get(fid) == self.geometry.watched_lane:
+                if _in_view(cam, (np.asarray(pose)[:, :3] - pos) @ rot, self._radii[fid]):
+                    return True
+        return False
 
     # ---- rendering
     def submit(self, poses: Mapping[int, np.ndarray], want_top: bool = True, want_side: bool = True) -> None:
