@@ -18,7 +18,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
-from woody_msgs.msg import FilletSpawn
+from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
 
 from woody_sim.fillet_model import DEFAULT_TOTAL_MASS, MIN_STABLE_MASS
@@ -26,6 +26,7 @@ from woody_sim.line_geometry import LineGeometry, fpm_to_mps
 from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.rendering import RenderProcess, camera_info_fields
+from woody_sim.pacing import LeadLimiter
 from woody_sim.ros_params import declare, run_node
 from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
@@ -66,6 +67,9 @@ class LineSim(Node):
         self.realtime = declare(self, "realtime", False, "Pace the simulation to the wall clock.")
         self.duration = declare(self, "duration_s", 0.0, "Exit after this much sim time (0 = run until stopped).",
                                 0.0, 1e6)
+        max_lead = declare(self, "max_lead_s", 0.0, "Hold the simulation while the newest /vision/tracks stamp lags "
+                           "more than this behind (0 = run free); keeps a slower vision graph from losing frames.",
+                           0.0, 10.0)
         self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
                                         "subscribers listen to the top depth image.", 0, 100)
         if not self.k_values or any(k < 0 for k in self.k_values):
@@ -104,6 +108,11 @@ class LineSim(Node):
         self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
         self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
         self.create_service(SpawnFillet, "/spawn_fillet", self.on_spawn_request)
+        self.pacer = LeadLimiter(max_lead) if max_lead > 0 else None
+        if self.pacer is not None:
+            self.create_subscription(FilletTrackArray, "/vision/tracks",
+                                     lambda m: self.pacer.ack(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9),
+                                     QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
         self.get_logger().info(
             f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
             f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
@@ -200,6 +209,8 @@ class LineSim(Node):
                 want_side = self.side_gate.take(self.renderer.side_view_occupied(poses), now)
                 next_side += self.side_period
             if want_top or want_side:
+                if want_top:
+                    self._hold_for_consumer(executor, now)
                 if pending_stamp is not None:
                     self._publish_frames(self.renderer.collect(copy=False), pending_stamp)
                 self._publish_clock()
@@ -226,6 +237,16 @@ class LineSim(Node):
                                f"{self.spawned} fillets spawned")
         executor.remove_node(self)
         return 0
+
+    def _hold_for_consumer(self, executor, now: float) -> None:
+        """With max_lead_s: wait (serving callbacks) until /vision/tracks has caught up to within the lead."""
+        if self.pacer is None:
+            return
+        start, stalls = time.monotonic(), self.pacer.stalls
+        while rclpy.ok(context=self.context) and self.pacer.must_wait(now, time.monotonic() - start):
+            executor.spin_once(timeout_sec=0.005)
+        if self.pacer.stalls > stalls and self.pacer.stalls == 1:
+            self.get_logger().warning(f"/vision/tracks silent for {self.pacer.stall_s:g} s: running on without it")
 
     def _wait_for_subscribers(self, executor) -> None:
         if not self.wait_subscribers:

@@ -21,6 +21,10 @@ from woody_tools.graph import NodeProcess, lease_domain, wait_for
 from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
 
 
+MAX_LEAD_S = 0.1
+"""line_sim runs at most this far (sim s, 3 top frames) ahead of the segmenter, whose queue holds 5 frames."""
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lanes", type=int, default=3, help="lanes across the belt, 1-6 (default 3)")
     parser.add_argument("--speed-fpm", type=float, default=100.0, help="line speed in feet per minute (default 100)")
@@ -134,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
         "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
         "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
         "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
+        "max_lead_s": MAX_LEAD_S,
     }
     vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes}
     grader_params = dict(vision_params)

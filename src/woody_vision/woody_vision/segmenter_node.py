@@ -94,16 +94,17 @@ class Segmenter(Node):
             self.background.reset()
             if self.tracker is not None:
                 self.tracker.reset()
-        if not self.background.ready:
-            self.background.add(depth)
-            return
-        if self.tracker is None:
-            self.checker.reject("no camera_info received yet on /top_camera/depth/camera_info; frame skipped")
+        out = FilletTrackArray(header=msg.header, image_width=msg.width, image_height=msg.height)
+        if not self.background.ready or self.tracker is None:
+            if not self.background.ready:
+                self.background.add(depth)
+            else:
+                self.checker.reject("no camera_info received yet on /top_camera/depth/camera_info; frame skipped")
+            self.tracks_pub.publish(out)  # every depth frame is answered: a paced line_sim waits for it
             return
         blobs = segment_depth(depth, self.background.depth, self.params)
         update = self.tracker.update(blobs)
-        out = FilletTrackArray(header=msg.header, image_width=msg.width, image_height=msg.height,
-                               ended_ids=[t.track_id for t in update.ended])
+        out.ended_ids = [t.track_id for t in update.ended]
         for track in update.active:
             blob = track.blob
             u, v, w, h = blob.bbox
