@@ -67,7 +67,9 @@ def reference_ms(repeats: int = 9) -> float:
 
 
 RATES = ("rtf", "per_min")
-"""Keys containing these are rates (more is faster); the others ending in _ms are times."""
+"""Keys containing these are rates (more is faster); the other keys with _ms are times ..."""
+NOT_TIMED = {"physics_dt_ms"}
+"""... except these (settings, not measurements)."""
 
 
 def with_reference(figures: dict, reference: float) -> dict:
@@ -77,7 +79,7 @@ def with_reference(figures: dict, reference: float) -> dict:
         out[key] = value
         if isinstance(value, float) and any(r in key for r in RATES):
             out[f"{key}_ref"] = value * reference / 1e3
-        elif isinstance(value, float) and ("_ms" in key):
+        elif isinstance(value, float) and "_ms" in key and key not in NOT_TIMED:
             out[f"{key}_ref"] = value / reference
     return out
 
