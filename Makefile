@@ -16,6 +16,7 @@ test: setup
 bench: setup
 	$(VENV)/bin/woody bench sim
 	$(VENV)/bin/woody bench vision
+	$(VENV)/bin/woody bench graph
 
 clean:
 	rm -rf ros_ws/build ros_ws/log

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, Point32, Polygon
+from geometry_msgs.msg import Point
 from std_msgs.msg import Header
 from woody_msgs.msg import FilletSpawn, FilletTrack, FilletTrackArray, FilletVerdict, GateCommand
 from woody_msgs.srv import SpawnFillet
@@ -19,7 +19,7 @@ def track(track_id: int = 7) -> FilletTrack:
     return FilletTrack(
         id=track_id, lane=2, centroid_u=101.5, centroid_v=220.25, bbox_u=80, bbox_v=190, bbox_width=45,
         bbox_height=90, area=3120.0, mean_height=0.021, age=14, unseen=0,
-        contour=Polygon(points=[Point32(x=80.0, y=190.0), Point32(x=125.0, y=190.0), Point32(x=100.0, y=280.0)]),
+        contour_uv=[80, 190, 125, 190, 100, 280],
     )
 
 

@@ -33,7 +33,8 @@ def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_pa
     ros_node.create_subscription(FilletSpawn, "/line/ground_truth", received["/line/ground_truth"].append,
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    sim = NodeProcess("line_sim", {"duration_s": duration, "wait_for_subscribers": 1, "side_rate_hz": 60.0},
+    sim = NodeProcess("line_sim", {"duration_s": duration, "wait_for_subscribers": 1, "side_rate_hz": 60.0,
+                                   "side_idle_rate_hz": 60.0},
                       domain_id=ros_domain, log_dir=tmp_path)
     try:
         spin_until(ros_node, lambda: not sim.alive(), timeout=120.0)

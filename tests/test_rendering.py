@@ -101,3 +101,17 @@ def test_bad_input_is_refused(geometry, reference):
         renderer.render_top({0: np.zeros((3, 7))})
     info = camera_info_fields(geometry.top_camera())
     assert info["width"] == 672 and info["K"][0] == pytest.approx(geometry.top_camera().fx)
+
+
+def test_render_process_knows_when_the_side_view_is_empty(geometry, reference):
+    visuals, offsets = reference
+    lane = geometry.watched_lane
+    with RenderProcess(geometry) as remote:
+        remote.add_fillet(0, lane, visuals)
+        remote.add_fillet(1, (lane + 1) % geometry.lanes, visuals)
+        other_lane = {1: flat_poses(offsets, 0.0, geometry.lane_y((lane + 1) % geometry.lanes))}
+        assert not remote.side_view_occupied(other_lane)
+        assert not remote.side_view_occupied({0: flat_poses(offsets, -2.0, geometry.lane_y(lane)), **other_lane})
+        assert remote.side_view_occupied({0: flat_poses(offsets, -0.1, geometry.lane_y(lane))})
+        remote.remove_fillet(0)
+        assert not remote.side_view_occupied(other_lane)

@@ -177,3 +177,19 @@ def test_unplayable_bags_exit_2_with_one_line(tmp_path, capsys, make, args, mess
     assert replay.run(parser.parse_args([str(bag), *args])) == 2
     out, err = capsys.readouterr()
     assert out == "" and err == message.format(bag=bag) + "\n"
+
+
+def test_a_topic_recorded_with_an_older_woody_msgs_definition_is_skipped_with_one_line(tmp_path, capsys, monkeypatch):
+    from woody_tools import mcap_io
+
+    current = mcap_io.message_definition
+    monkeypatch.setattr(mcap_io, "message_definition",
+                        lambda t: current(t).replace("int32[] contour_uv", "geometry_msgs/Polygon contour"))
+    bag = write_bag(tmp_path / "old.mcap", with_clock=False)
+    monkeypatch.undo()
+    parser = argparse.ArgumentParser()
+    replay.add_arguments(parser)
+    assert replay.run(parser.parse_args([str(bag), "--topics", TRACKS, "--no-clock"])) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith(f"replay: skipping {TRACKS}: recorded with an older woody_msgs/msg/FilletTrackArray")
+    assert err[1:] == [f"replay: {bag}: nothing playable in the selected topics"]

@@ -18,7 +18,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
-from woody_msgs.msg import FilletSpawn
+from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
 
 from woody_common.calibration import load_calibration
@@ -26,7 +26,9 @@ from woody_sim.line_geometry import LineGeometry, fpm_to_mps
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.rendering import RenderProcess, camera_info_fields
+from woody_sim.pacing import LeadLimiter
 from woody_sim.ros_params import declare, run_node
+from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
 
 TOP_FRAME = "top_camera_optical_frame"
@@ -63,10 +65,15 @@ class LineSim(Node):
         segments = declare(self, "segments", 40, "Rigid segments N per fillet.", 2, 200)
         top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
         side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0, 400.0)
+        side_idle = declare(self, "side_idle_rate_hz", 2.0, "Side frame rate while no fillet of the watched lane "
+                            "is in its view (frames just after one leaves go at side_rate_hz).", 0.1, 400.0)
         side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
         self.realtime = declare(self, "realtime", False, "Pace the simulation to the wall clock.")
         self.duration = declare(self, "duration_s", 0.0, "Exit after this much sim time (0 = run until stopped).",
                                 0.0, 1e6)
+        max_lead = declare(self, "max_lead_s", 0.0, "Hold the simulation while the newest /vision/tracks stamp lags "
+                           "more than this behind (0 = run free); keeps a slower vision graph from losing frames.",
+                           0.0, 10.0)
         self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
                                         "subscribers listen to the top depth image.", 0, 100)
         if not self.k_values or any(k < 0 for k in self.k_values):
@@ -90,6 +97,7 @@ class LineSim(Node):
         self.spawned = 0
         self.top_period = 1.0 / top_rate
         self.side_period = 1.0 / side_rate if side_rate > 0 else None
+        self.side_gate = SideFrameGate(idle_period_s=1.0 / side_idle)
         self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
 
         latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -105,6 +113,11 @@ class LineSim(Node):
         self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
         self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
         self.create_service(SpawnFillet, "/spawn_fillet", self.on_spawn_request)
+        self.pacer = LeadLimiter(max_lead) if max_lead > 0 else None
+        if self.pacer is not None:
+            self.create_subscription(FilletTrackArray, "/vision/tracks",
+                                     lambda m: self.pacer.ack(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9),
+                                     QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
         self.get_logger().info(
             f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
             f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
@@ -195,15 +208,21 @@ class LineSim(Node):
                     self.get_logger().warning(f"fillet {fillet_id} removed: its chain blew up numerically at the "
                                               "belt edge (known rare instability); it will be unscored")
             want_top = now + 1e-9 >= next_top
-            want_side = self.side_period is not None and now + 1e-9 >= next_side
+            want_side, poses = False, None
+            if self.side_period is not None and now + 1e-9 >= next_side:
+                poses = self.world.segment_poses()
+                want_side = self.side_gate.take(self.renderer.side_view_occupied(poses), now)
+                next_side += self.side_period
             if want_top or want_side:
+                if want_top:
+                    self._hold_for_consumer(executor, now)
                 if pending_stamp is not None:
                     self._publish_frames(self.renderer.collect(copy=False), pending_stamp)
                 self._publish_clock()
-                self.renderer.submit(self.world.segment_poses(), want_top=want_top, want_side=want_side)
+                self.renderer.submit(poses if poses is not None else self.world.segment_poses(), want_top=want_top,
+                                     want_side=want_side)
                 pending_stamp = now
                 next_top += self.top_period if want_top else 0.0
-                next_side += self.side_period if want_side else 0.0
                 next_clock = now + CLOCK_PERIOD
                 executor.spin_once(timeout_sec=0.0)  # serve /spawn_fillet between frames, not every step
             elif now >= next_clock:
@@ -223,6 +242,16 @@ class LineSim(Node):
                                f"{self.spawned} fillets spawned")
         executor.remove_node(self)
         return 0
+
+    def _hold_for_consumer(self, executor, now: float) -> None:
+        """With max_lead_s: wait (serving callbacks) until /vision/tracks has caught up to within the lead."""
+        if self.pacer is None:
+            return
+        start, stalls = time.monotonic(), self.pacer.stalls
+        while rclpy.ok(context=self.context) and self.pacer.must_wait(now, time.monotonic() - start):
+            executor.spin_once(timeout_sec=0.005)
+        if self.pacer.stalls > stalls and self.pacer.stalls == 1:
+            self.get_logger().warning(f"/vision/tracks silent for {self.pacer.stall_s:g} s: running on without it")
 
     def _wait_for_subscribers(self, executor) -> None:
         if not self.wait_subscribers:

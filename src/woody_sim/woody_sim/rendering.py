@@ -1,4 +1,4 @@
-"""Fast CPU rendering of the line's two cameras (no rclpy; plain numpy).
+"""Fast CPU rendering of the line's two cameras (no rclpy; numpy + a compiled rasteriser).
 
 What the cameras see is split into a static part and a moving part:
 
@@ -7,20 +7,13 @@ What the cameras see is split into a static part and a moving part:
   camera when the renderer is built, giving a background colour image and,
   for the top camera, a metric z-depth image;
 * the fillets (chains of segment meshes posed by the physics) are rasterised
-  every frame by a vectorised numpy z-buffer rasteriser and composited over
-  the background by depth.
+  every frame by a compiled z-buffer scan-converter (:mod:`woody_sim.raster`)
+  and composited over the background by depth.
 
-The rasteriser works on all triangles of all visible fillets at once: per
-triangle pixel bounding boxes are computed in bulk, expanded into (triangle,
-pixel) candidates with ``np.repeat``, tested with edge functions at pixel
-centres (inclusive test with a tiny tolerance, so shared edges leave no
-cracks), and resolved with one ``np.minimum.at`` over a packed
-``(depth, triangle)`` int64 key. Depth is perspective-correct (1/z is
-interpolated in screen space) and recomputed in float64 for the winning
-triangle, so a planar surface comes out exact to float32 precision. Fillet
-meshes have thousands of sub-pixel triangles, so almost every triangle yields
-zero or one candidate and the cost scales with covered pixels, not with a
-per-triangle Python loop (there is none).
+Vertices are posed and projected with numpy (a few array operations per
+fillet); the per-triangle, per-pixel work happens in compiled code. Depth is
+perspective-correct (1/z is interpolated in screen space) in float64, so a
+planar surface comes out exact to float32 precision.
 
 Conventions: images follow REP 118 (``rgb8`` as uint8 (H, W, 3), depth
 ``32FC1`` in metres along the optical axis). OpenCV/ROS pixel convention:
@@ -59,6 +52,7 @@ from typing import Any, Mapping, NamedTuple, Sequence
 import numpy as np
 
 from woody_sim.line_geometry import LineGeometry, PinholeCamera
+from woody_sim.raster import ZBuffer
 
 __all__ = [
     "BELT_RGB",
@@ -108,10 +102,6 @@ _LIGHT_DIR = _LIGHT_DIR / np.linalg.norm(_LIGHT_DIR)
 """Unit vector towards a distant light, world frame (above, slightly upstream and left)."""
 
 _SIDE_BELT_THICKNESS = 0.006
-_DEPTH_QUANT = 1e5  # z-buffer key resolution: 10 µm
-_TRI_BITS = 22
-_EDGE_TOL = 1e-9  # px², inclusive edge test tolerance (closes float cracks on shared edges)
-_MAX_TRIS = 1 << _TRI_BITS
 
 
 # --------------------------------------------------------------------------- helpers
@@ -219,20 +209,16 @@ def _prepare_fillet(
     maxn = max(v.shape[0] for v, _ in visuals)
     verts = np.zeros((n, maxn, 3))
     faces = []
-    radius = np.zeros(n)
     for i, (v, f) in enumerate(visuals):
         verts[i, : v.shape[0]] = v
         faces.append(f + i * maxn)
-        radius[i] = float(np.sqrt((v * v).sum(axis=1).max()))
     faces_arr = np.concatenate(faces, axis=0) if faces else np.zeros((0, 3), np.int64)
-    if faces_arr.shape[0] >= _MAX_TRIS:
-        raise ValueError(f"add_fillet: too many triangles ({faces_arr.shape[0]}), max {_MAX_TRIS - 1}")
     if color is None:
         color = fillet_color(fillet_id)
     c = np.asarray(color, dtype=np.float64)
     if c.shape != (3,) or np.any(c < 0) or np.any(c > 255):
         raise ValueError(f"add_fillet: color must be three ints 0..255, got {color!r}")
-    return _PreparedFillet(int(fillet_id), int(lane), n, verts, faces_arr, radius, c)
+    return _PreparedFillet(int(fillet_id), int(lane), n, verts, faces_arr, _segment_radii(visuals), c)
 
 
 class _View:
@@ -249,6 +235,8 @@ class _View:
         self.bg_rgb = bg_rgb
         self.bg_depth = bg_depth
         self.light_opt = _LIGHT_DIR @ self.rot  # light direction in the optical frame
+        self.zbuffer = ZBuffer(self.w, self.h, (self.fx, self.fy, self.cx, self.cy), self.near, self.light_opt,
+                               AMBIENT, DIFFUSE)
 
     def pixel_rays(self) -> np.ndarray:
         """(H, W, 3) world directions of the pixel-centre rays, scaled so optical z = 1."""
@@ -327,100 +315,6 @@ def _side_background(g: LineGeometry, view: _View) -> np.ndarray:
     return rgb
 
 
-# --------------------------------------------------------------------------- rasteriser
-def _rasterise(
-    view: _View, pts: np.ndarray, faces: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Z-buffer rasterise triangles given in the optical frame.
-
-    Returns (flat pixel indices, depth float64, winning face index) for the
-    covered pixels, or None if nothing is covered.
-    """
-    w, h = view.w, view.h
-    z = pts[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / z
-        u = view.fx * pts[:, 0] * inv + view.cx
-        v = view.fy * pts[:, 1] * inv + view.cy
-    behind = z < view.near
-    if behind.any():
-        # Drop triangles touching the near plane (fillets never get that close).
-        faces = faces[~behind[faces].any(axis=1)]
-        if faces.shape[0] == 0:
-            return None
-    fu = u[faces]
-    fv = v[faces]
-    x0 = np.maximum(np.ceil(fu.min(axis=1)), 0.0)
-    x1 = np.minimum(np.floor(fu.max(axis=1)), w - 1.0)
-    y0 = np.maximum(np.ceil(fv.min(axis=1)), 0.0)
-    y1 = np.minimum(np.floor(fv.max(axis=1)), h - 1.0)
-    nx = x1 - x0 + 1.0
-    ny = y1 - y0 + 1.0
-    keep = np.flatnonzero((nx > 0) & (ny > 0))
-    if keep.size == 0:
-        return None
-    nx = nx[keep].astype(np.int64)
-    cnt = nx * ny[keep].astype(np.int64)
-    fu = fu[keep]
-    fv = fv[keep]
-    # Per-triangle record: u0 v0 u1 v1 u2 v2 x0 y0 sign(area) (one row gather per candidate).
-    area2 = (fu[:, 1] - fu[:, 0]) * (fv[:, 2] - fv[:, 0]) - (fu[:, 2] - fu[:, 0]) * (fv[:, 1] - fv[:, 0])
-    rec = np.empty((keep.size, 9))
-    rec[:, 0:6:2] = fu
-    rec[:, 1:6:2] = fv
-    rec[:, 6] = x0[keep]
-    rec[:, 7] = y0[keep]
-    rec[:, 8] = np.sign(area2)
-    total = int(cnt.sum())
-    tri = np.repeat(np.arange(keep.size), cnt)
-    if total == keep.size:  # every triangle has exactly one candidate pixel
-        dx = np.zeros(total)
-        dy = np.zeros(total)
-    else:
-        start = np.cumsum(cnt) - cnt
-        local = np.arange(total) - start[tri]
-        nxt = nx[tri]
-        dy, dx = np.divmod(local, nxt)
-    r = rec[tri]
-    px = r[:, 6] + dx
-    py = r[:, 7] + dy
-    s = r[:, 8]
-    # Edge functions (opposite vertex i), scaled by the winding sign so inside >= 0.
-    e0 = ((r[:, 4] - r[:, 2]) * (py - r[:, 3]) - (r[:, 5] - r[:, 3]) * (px - r[:, 2])) * s
-    e1 = ((r[:, 0] - r[:, 4]) * (py - r[:, 5]) - (r[:, 1] - r[:, 5]) * (px - r[:, 4])) * s
-    e2 = ((r[:, 2] - r[:, 0]) * (py - r[:, 1]) - (r[:, 3] - r[:, 1]) * (px - r[:, 0])) * s
-    inside = (e0 >= -_EDGE_TOL) & (e1 >= -_EDGE_TOL) & (e2 >= -_EDGE_TOL) & (s != 0)
-    idx = np.flatnonzero(inside)
-    if idx.size == 0:
-        return None
-    e0, e1, e2 = e0[idx], e1[idx], e2[idx]
-    t_in = tri[idx]
-    fz = inv[faces[keep[t_in]]]  # (n, 3) 1/z at the corners
-    esum = e0 + e1 + e2
-    invz = (e0 * fz[:, 0] + e1 * fz[:, 1] + e2 * fz[:, 2]) / esum
-    depth = 1.0 / invz
-    pix = py[idx].astype(np.int64) * w + px[idx].astype(np.int64)
-    if idx.size >= _MAX_TRIS:
-        raise ValueError(f"too many covered fragments in one frame ({idx.size})")
-    # z-buffer: one int64 key per fragment, (depth in 10 µm << 22) | fragment index.
-    key = (np.rint(depth * _DEPTH_QUANT).astype(np.int64) << _TRI_BITS) | np.arange(idx.size, dtype=np.int64)
-    pmin, pmax = int(pix.min()), int(pix.max())
-    zbuf = np.full(pmax - pmin + 1, np.iinfo(np.int64).max, dtype=np.int64)
-    np.minimum.at(zbuf, pix - pmin, key)
-    hit = np.flatnonzero(zbuf != np.iinfo(np.int64).max)
-    win = zbuf[hit] & (_MAX_TRIS - 1)  # winning fragment index
-    return hit + pmin, depth[win], keep[t_in[win]]
-
-
-def _shade_faces(pts: np.ndarray, faces: np.ndarray, light: np.ndarray) -> np.ndarray:
-    """Two-sided Lambert factor per face (pts and light in the same frame)."""
-    p0 = pts[faces[:, 0]]
-    n = np.cross(pts[faces[:, 1]] - p0, pts[faces[:, 2]] - p0)
-    nn = np.linalg.norm(n, axis=1)
-    cos = np.abs(n @ light) / np.maximum(nn, 1e-30)
-    return AMBIENT + DIFFUSE * cos
-
-
 # --------------------------------------------------------------------------- renderer
 class Frames(NamedTuple):
     """One render result; fields not requested are None."""
@@ -493,14 +387,7 @@ class LineRenderer:
         view = self._top
         rgb = view.bg_rgb.copy()
         depth = view.bg_depth.copy()
-        res = self._draw(view, checked, lane=None)
-        if res is not None:
-            pix, z, col = res
-            dflat = depth.reshape(-1)
-            front = z < dflat[pix]
-            pix, z, col = pix[front], z[front], col[front]
-            dflat[pix] = z
-            rgb.reshape(-1, 3)[pix] = col
+        self._draw(view, checked, lane=None, rgb=rgb, depth=depth)
         return rgb, depth
 
     def render_side(self, poses: Mapping[int, np.ndarray]) -> np.ndarray:
@@ -510,10 +397,7 @@ class LineRenderer:
         checked = self._check_poses(poses)
         view = self._side
         rgb = view.bg_rgb.copy()
-        res = self._draw(view, checked, lane=self.geometry.watched_lane)
-        if res is not None:
-            pix, _, col = res
-            rgb.reshape(-1, 3)[pix] = col
+        self._draw(view, checked, lane=self.geometry.watched_lane, rgb=rgb, depth=None)
         return rgb
 
     def render(self, poses: Mapping[int, np.ndarray], want_top: bool = True, want_side: bool = True) -> Frames:
@@ -525,53 +409,49 @@ class LineRenderer:
         return [(self._fillets[fid], p) for fid, p in _validate_poses(self._fillets, poses)]
 
     def _draw(
-        self, view: _View, checked: list[tuple[_PreparedFillet, np.ndarray]], lane: int | None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        pts_list, faces_list, col_list = [], [], []
-        offset = 0
+        self,
+        view: _View,
+        checked: list[tuple[_PreparedFillet, np.ndarray]],
+        lane: int | None,
+        rgb: np.ndarray,
+        depth: np.ndarray | None,
+    ) -> None:
+        """Draw the fillets (of ``lane`` only, if given) over ``rgb`` and in front of ``depth`` in place."""
+        colors = []
         for fl, pose in checked:
             if lane is not None and fl.lane != lane:
                 continue
-            rw = quaternions_to_matrices(pose[:, 3:7])  # (N, 3, 3) link -> world
             t_opt = (pose[:, :3] - view.pos) @ view.rot  # link origins in the optical frame
-            if not _in_view(view, t_opt, fl.seg_radius):
+            if not _in_view(view.camera, t_opt, fl.seg_radius):
                 continue
-            m = np.matmul(view.rot.T[None, :, :], rw)  # link -> optical
-            pts = np.matmul(fl.verts, m.transpose(0, 2, 1)) + t_opt[:, None, :]
-            pts_list.append(pts.reshape(-1, 3))
-            faces_list.append(fl.faces + offset)
-            col_list.append(np.broadcast_to(fl.color, (fl.faces.shape[0], 3)))
-            offset += pts.shape[0] * pts.shape[1]
-        if not pts_list:
-            return None
-        pts = np.concatenate(pts_list) if len(pts_list) > 1 else pts_list[0]
-        faces = np.concatenate(faces_list) if len(faces_list) > 1 else faces_list[0]
-        res = _rasterise(view, pts, faces)
-        if res is None:
-            return None
-        pix, depth, face = res
-        wf = faces[face]
-        shade = _shade_faces(pts, wf, view.light_opt)
-        base = np.concatenate(col_list)[face] if len(col_list) > 1 else col_list[0][face]
-        col = np.clip(np.rint(base * shade[:, None]), 0, 255).astype(np.uint8)
-        return pix, depth.astype(np.float32), col
+            m = np.matmul(view.rot.T[None, :, :], quaternions_to_matrices(pose[:, 3:7]))  # link -> optical
+            view.zbuffer.draw(fl.verts, fl.faces, m, t_opt, len(colors))
+            colors.append(fl.color)
+        if colors:
+            view.zbuffer.compose(np.array(colors), rgb, depth)
 
 
-def _in_view(view: _View, t_opt: np.ndarray, radius: np.ndarray) -> bool:
+def _in_view(camera: PinholeCamera, t_opt: np.ndarray, radius: np.ndarray) -> bool:
+    """Whether any segment's bounding sphere (centres ``t_opt`` in the optical frame) may show in the image."""
     z = t_opt[:, 2]
-    if np.all(z + radius < view.near):
+    if np.all(z + radius < camera.near):
         return False
-    zn = np.maximum(z - radius, view.near)
-    zf = np.maximum(z + radius, view.near)
+    zn = np.maximum(z - radius, camera.near)
+    zf = np.maximum(z + radius, camera.near)
     # Conservative pixel extent of each segment's bounding sphere.
-    us = [view.fx * (t_opt[:, 0] + sx * radius) / zz for sx in (-1, 1) for zz in (zn, zf)]
-    vs = [view.fy * (t_opt[:, 1] + sy * radius) / zz for sy in (-1, 1) for zz in (zn, zf)]
-    u0 = np.min(us, axis=0) + view.cx
-    u1 = np.max(us, axis=0) + view.cx
-    v0 = np.min(vs, axis=0) + view.cy
-    v1 = np.max(vs, axis=0) + view.cy
-    vis = (u1 >= -1) & (u0 <= view.w) & (v1 >= -1) & (v0 <= view.h)
+    us = [camera.fx * (t_opt[:, 0] + sx * radius) / zz for sx in (-1, 1) for zz in (zn, zf)]
+    vs = [camera.fy * (t_opt[:, 1] + sy * radius) / zz for sy in (-1, 1) for zz in (zn, zf)]
+    u0 = np.min(us, axis=0) + camera.cx
+    u1 = np.max(us, axis=0) + camera.cx
+    v0 = np.min(vs, axis=0) + camera.cy
+    v1 = np.max(vs, axis=0) + camera.cy
+    vis = (u1 >= -1) & (u0 <= camera.width) & (v1 >= -1) & (v0 <= camera.height)
     return bool(vis.any())
+
+
+def _segment_radii(visuals: Sequence[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """Bounding radius of each segment about its link origin."""
+    return np.array([float(np.sqrt((v * v).sum(axis=1).max())) for v, _ in visuals])
 
 
 def _validate_add(
@@ -688,6 +568,8 @@ class RenderProcess:
         self._flags = (bool(render_top), bool(render_side))
         self._known: dict[int, int] = {}  # id -> n_segments
         self._lanes: dict[int, int] = {}
+        self._radii: dict[int, np.ndarray] = {}
+        self._side_camera = geometry.side_camera()
         self._inflight: tuple[bool, bool] | None = None
         self._timeout = float(timeout)
         self.last_render_s: tuple[float, float] = (0.0, 0.0)
@@ -778,6 +660,7 @@ class RenderProcess:
         self._send(("add", fid, lane_i, vis, None if color is None else tuple(int(c) for c in color)))
         self._known[fid] = len(vis)
         self._lanes[fid] = lane_i
+        self._radii[fid] = _segment_radii(vis)
 
     def remove_fillet(self, fillet_id: int) -> None:
         try:
@@ -788,6 +671,18 @@ class RenderProcess:
         self._send(("remove", fid))
         del self._known[fid]
         del self._lanes[fid]
+        del self._radii[fid]
+
+    def side_view_occupied(self, poses: Mapping[int, np.ndarray]) -> bool:
+        """Whether a fillet of the watched lane may show in the side camera's image (else the frame is the
+        static background, which a consumer has seen already)."""
+        cam = self._side_camera
+        rot, pos = np.asarray(cam.rotation, dtype=np.float64), np.asarray(cam.position, dtype=np.float64)
+        for fid, pose in poses.items():
+            if self._lanes.get(fid) == self.geometry.watched_lane:
+                if _in_view(cam, (np.asarray(pose)[:, :3] - pos) @ rot, self._radii[fid]):
+                    return True
+        return False
 
     # ---- rendering
     def submit(self, poses: Mapping[int, np.ndarray], want_top: bool = True, want_side: bool = True) -> None:
@@ -935,16 +830,31 @@ def draped_poses(offsets: np.ndarray, x: float, y: float, roller_radius: float) 
     return p
 
 
-def benchmark_rendering(
-    n_fillets: int = 3, frames: int = 100, geometry: LineGeometry | None = None, n_segments: int = 40
-) -> dict:
-    """Time LineRenderer on the reference meshes: fillets spread over the lanes, moving
-    along the belt and over the roller (the watched lane always has one in the side view).
+def _bench_poses(g: LineGeometry, offsets: list[tuple[np.ndarray, int]], phase: float) -> dict[int, np.ndarray]:
+    """Bench scene at ``phase`` in [0, 1]: fillets spread over the lanes, along the belt and over the roller."""
+    poses = {}
+    for i, (off, lane) in enumerate(offsets):
+        x = -0.45 + 0.5 * ((phase + i / len(offsets)) % 1.0)
+        y = g.lane_y(lane)
+        poses[i] = flat_poses(off, x, y) if x < -0.1 else draped_poses(off, x, y, g.roller_radius)
+    return poses
 
-    Returns ms per frame {top_p50, top_p95, side_p50, side_p95} plus counts.
+
+def benchmark_rendering(
+    n_fillets: int = 3, frames: int = 100, geometry: LineGeometry | None = None, n_segments: int = 40,
+    baseline_every: int = 6,
+) -> dict:
+    """Time LineRenderer on the reference meshes (the watched lane always has a fillet in the side view)
+    and, on every ``baseline_every``-th frame, pybullet's TinyRenderer on the same scene and cameras.
+
+    Returns ms per frame {top_p50, top_p95, side_p50, side_p95, tiny_top_p50, tiny_side_p50}, the
+    speed-ups over TinyRenderer (p50 ratios) and counts.
     """
+    from woody_sim.render_baseline import TinyRendererScene
+
     g = geometry or LineGeometry()
     r = LineRenderer(g)
+    tiny = TinyRendererScene()
     tri = 0
     offsets = []
     for i in range(n_fillets):
@@ -952,33 +862,31 @@ def benchmark_rendering(
         tri += sum(len(v.faces) for v in vis)
         lane = (g.watched_lane + i) % g.lanes
         r.add_fillet(i, lane, vis)
+        tiny.add_fillet(i, vis, fillet_color(i))
         offsets.append((off, lane))
-    top_t, side_t = [], []
-    for k in range(frames):
-        phase = k / max(frames - 1, 1)
-        poses = {}
-        for i, (off, lane) in enumerate(offsets):
-            x = -0.45 + 0.5 * ((phase + i / max(n_fillets, 1)) % 1.0)
-            y = g.lane_y(lane)
-            poses[i] = flat_poses(off, x, y) if x < -0.1 else draped_poses(off, x, y, g.roller_radius)
-        t0 = time.perf_counter()
-        r.render_top(poses)
-        t1 = time.perf_counter()
-        r.render_side(poses)
-        t2 = time.perf_counter()
-        top_t.append(t1 - t0)
-        side_t.append(t2 - t1)
-    top = np.array(top_t) * 1e3
-    side = np.array(side_t) * 1e3
-    return {
-        "n_fillets": n_fillets,
-        "frames": frames,
-        "triangles": tri,
-        "top_ms_p50": float(np.percentile(top, 50)),
-        "top_ms_p95": float(np.percentile(top, 95)),
-        "side_ms_p50": float(np.percentile(side, 50)),
-        "side_ms_p95": float(np.percentile(side, 95)),
-    }
+    times: dict[str, list[float]] = {"top": [], "side": [], "tiny_top": [], "tiny_side": []}
+    try:
+        for k in range(frames):
+            poses = _bench_poses(g, offsets, k / max(frames - 1, 1))
+            t0 = time.perf_counter()
+            r.render_top(poses)
+            t1 = time.perf_counter()
+            r.render_side({i: p for i, p in poses.items() if offsets[i][1] == g.watched_lane})
+            times["top"].append(t1 - t0)
+            times["side"].append(time.perf_counter() - t1)
+            if k % baseline_every == 0:
+                times["tiny_top"].append(tiny.render(g.top_camera(), poses))
+                times["tiny_side"].append(tiny.render(g.side_camera(), poses))
+    finally:
+        tiny.close()
+    ms = {name: np.array(t) * 1e3 for name, t in times.items()}
+    out: dict = {"n_fillets": n_fillets, "frames": frames, "triangles": tri}
+    for name in ("top", "side"):
+        out[f"{name}_ms_p50"] = float(np.percentile(ms[name], 50))
+        out[f"{name}_ms_p95"] = float(np.percentile(ms[name], 95))
+        out[f"tiny_{name}_ms_p50"] = float(np.percentile(ms[f"tiny_{name}"], 50))
+        out[f"{name}_speedup_vs_tiny"] = out[f"tiny_{name}_ms_p50"] / out[f"{name}_ms_p50"]
+    return out
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,29 +1,45 @@
-"""`woody bench sim` and `woody bench vision`: the speed figures the README records.
+"""`woody bench sim`, `woody bench vision` and `woody bench graph`: the speed figures the README records.
 
 Each benchmark calls the same modules the nodes use; the end-to-end figures
-(line_sim's real-time factor, verdict latency) start the real entry points as
-separate processes on a private ROS domain and measure them from outside.
+(line_sim's real-time factor, verdict latency, `woody run`, a sweep) start the
+real entry points as separate processes and measure them from outside.
+
+Machines differ about 2x and a shared one varies from minute to minute, so
+every run also times a fixed reference workload (numpy and plain Python,
+:func:`reference_ms`) and prints each figure divided by it (``*_ref``: a time
+in reference workloads, a rate per reference workload); the renderer is also
+compared with pybullet's TinyRenderer on the same scene.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
+import statistics
+import subprocess
+import tempfile
 import time
 from pathlib import Path
 
-from woody_tools.graph import NodeProcess, lease_domain
+import numpy as np
+
+from woody_tools.graph import NodeProcess, entry_point, lease_domain
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("target", choices=["sim", "vision"], help="what to benchmark")
+    parser.add_argument("target", choices=["sim", "vision", "graph"], help="what to benchmark")
     parser.add_argument("--json", dest="json_path", default=None, help="also write the figures to this JSON file")
     parser.add_argument("--seconds", type=float, default=10.0, help="sim seconds of each timed run (default 10)")
     parser.add_argument("--frames", type=int, default=300, help="frames per vision timing run (default 300)")
 
 
 def run(args: argparse.Namespace) -> int:
-    figures = bench_sim(args.seconds) if args.target == "sim" else bench_vision(args.frames, args.seconds)
+    reference = reference_ms()
+    benches = {"sim": lambda: bench_sim(args.seconds), "vision": lambda: bench_vision(args.frames, args.seconds),
+               "graph": bench_graph}
+    figures = benches[args.target]()
+    figures = {"reference_ms": reference, **with_reference(figures, 0.5 * (reference + reference_ms()))}
     width = max(len(k) for k in figures)
     for key, value in figures.items():
         print(f"{key:<{width}}  {value:.3f}" if isinstance(value, float) else f"{key:<{width}}  {value}")
@@ -33,31 +49,80 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def reference_ms(repeats: int = 9) -> float:
+    """Median wall ms of a fixed workload (a 200x200 matmul, a sort of a frame-sized array, a Python loop)."""
+    rng = np.random.default_rng(0)
+    matrix = rng.random((200, 200))
+    frame = rng.random((376, 672)).astype(np.float32)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        matrix @ matrix
+        np.sort(frame, axis=None)
+        total = 0.0
+        for i in range(20000):
+            total += i * 0.5
+        times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+RATES = ("rtf", "per_min")
+"""Keys containing these are rates (more is faster); the other keys with _ms are times ..."""
+NOT_TIMED = {"physics_dt_ms"}
+"""... except these (settings, not measurements)."""
+
+
+def with_reference(figures: dict, reference: float) -> dict:
+    """Each figure followed by its value in reference workloads (times) or per reference workload (rates)."""
+    out = {}
+    for key, value in figures.items():
+        out[key] = value
+        if isinstance(value, float) and any(r in key for r in RATES):
+            out[f"{key}_ref"] = value * reference / 1e3
+        elif isinstance(value, float) and "_ms" in key and key not in NOT_TIMED:
+            out[f"{key}_ref"] = value / reference
+    return out
+
+
 def bench_sim(seconds: float) -> dict:
     from woody_sim.line_world import benchmark_physics
     from woody_sim.rendering import benchmark_rendering
 
-    one = benchmark_physics(1, seconds)
-    three = benchmark_physics(3, seconds)
+    physics = {n: benchmark_physics(n, seconds) for n in (1, 3, 6)}
     render = benchmark_rendering(n_fillets=3, frames=120)
-    rtf = line_sim_rtf(seconds)
-    return {
-        "physics_step_ms_1": one["ms_per_step"],
-        "physics_step_ms_3": three["ms_per_step"],
-        "physics_dt_ms": 1000.0 * three["sim_seconds"] / three["steps"],
-        "physics_rtf_3": three["sim_s_per_wall_s"],
-        "render_top_ms": render["top_ms_p50"],
-        "render_top_ms_p95": render["top_ms_p95"],
-        "render_side_ms": render["side_ms_p50"],
-        "render_side_ms_p95": render["side_ms_p95"],
-        "rtf": rtf,
-    }
+    figures = {f"physics_step_ms_{n}": p["ms_per_step"] for n, p in physics.items()}
+    figures["physics_dt_ms"] = 1000.0 * physics[3]["sim_seconds"] / physics[3]["steps"]
+    figures.update({f"physics_rtf_{n}": physics[n]["sim_s_per_wall_s"] for n in (3, 6)})
+    for view in ("top", "side"):
+        figures[f"render_{view}_ms"] = render[f"{view}_ms_p50"]
+        figures[f"render_{view}_ms_p95"] = render[f"{view}_ms_p95"]
+        figures[f"tinyrenderer_{view}_ms"] = render[f"tiny_{view}_ms_p50"]
+        figures[f"render_{view}_speedup_vs_tinyrenderer"] = render[f"{view}_speedup_vs_tiny"]
+    figures["rtf"] = line_sim_rtf(seconds)
+    figures["rtf_side_200hz"] = line_sim_rtf(seconds, side_rate_hz=200.0)
+    return figures
 
 
-def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0) -> float:
-    """Sim seconds per wall second of the real line_sim process (3 lanes, top 30 Hz, side 60 Hz)."""
-    import tempfile
+def bench_graph(fillets: int = 12) -> dict:
+    """`woody run` (demo graph with the recorder) and a sweep of the three reference meshes, as subprocesses."""
+    from woody_sim.rendering import _MESH_DIR
 
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run"
+        subprocess.run([entry_point("woody"), "run", "--fillets", str(fillets), "--out", str(out)], check=True,
+                       capture_output=True, text=True)
+        log = (out / "logs" / "line_sim.log").read_text()
+        sweep = subprocess.run([entry_point("woody"), "sweep", "--meshes", str(_MESH_DIR), "--no-report", "--out",
+                                str(Path(tmp) / "sweep")], check=True, capture_output=True, text=True)
+    rtf = re.search(r"\(rtf ([0-9.]+)x\)", log)
+    rate = re.search(r"= ([0-9.]+) /min", sweep.stdout + sweep.stderr)
+    if rtf is None or rate is None:
+        raise RuntimeError("woody run or woody sweep did not report its speed")
+    return {"woody_run_rtf": float(rtf.group(1)), "sweep_evals_per_min": float(rate.group(1))}
+
+
+def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_rate_hz: float = 60.0) -> float:
+    """Sim seconds per wall second of the real line_sim process (3 lanes, top 30 Hz, side ``side_rate_hz``)."""
     import rclpy
     from rosgraph_msgs.msg import Clock
 
@@ -70,7 +135,7 @@ def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0) -> fl
         node.create_subscription(Clock, "/clock", lambda m: samples.append(
             (time.monotonic(), m.clock.sec + m.clock.nanosec * 1e-9)), 100)
         sim = NodeProcess("line_sim", {"lanes": lanes, "line_speed_fpm": speed_fpm, "top_rate_hz": 30.0,
-                                       "side_rate_hz": 60.0, "duration_s": warmup + seconds},
+                                       "side_rate_hz": side_rate_hz, "duration_s": warmup + seconds},
                           domain_id=lease.domain_id, log_dir=Path(logs))
         executor = rclpy.executors.SingleThreadedExecutor(context=context)
         executor.add_node(node)

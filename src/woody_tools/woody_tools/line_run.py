@@ -9,14 +9,20 @@ and leaves the bag, verdicts.csv and report.md in the output folder.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import time
 from datetime import datetime
 from pathlib import Path
 
+from woody_tools.cpu_usage import CpuAccounting
 from woody_tools.graph import NodeProcess, lease_domain, wait_for
 from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
+
+
+MAX_LEAD_S = 0.1
+"""line_sim runs at most this far (sim s, 3 top frames) ahead of the segmenter, whose queue holds 5 frames."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -132,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
         "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
         "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
         "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
+        "max_lead_s": MAX_LEAD_S,
     }
     vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes}
     grader_params = dict(vision_params)
@@ -140,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
 
     nodes: list[NodeProcess] = []
     monitor = None
+    cpu = None
     rows: list[dict] = []
     stopping = {"signal": None}
 
@@ -156,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
         start("reject_gate", {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm})
         start("line_sim", sim_params)
         monitor = LineMonitor(lease.domain_id)
+        cpu = CpuAccounting({"woody run": os.getpid(), **{n.name: n.process.pid for n in nodes}})
         wall_start = time.monotonic()
         bar = tqdm(total=fillets or None, unit="fillet", desc="graded", dynamic_ncols=True, mininterval=1.0,
                    file=sys.stderr, disable=None if sys.stderr.isatty() else True)
@@ -163,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
         done_since = None
         while True:
             monitor.spin(0.25)
+            cpu.sample()
             graded = len(monitor.verdicts)
             elapsed = time.monotonic() - wall_start
             status = (f"spawned {len(monitor.spawns)}, sim {monitor.sim_time:.1f} s, "
@@ -189,6 +199,9 @@ def run(args: argparse.Namespace) -> int:
                     break
         bar.close()
     finally:
+        if cpu is not None:
+            cpu.sample()
+            wall = time.monotonic() - wall_start
         for node in nodes:
             if node.name != "recorder":
                 node.signal(signal.SIGINT)
@@ -216,6 +229,7 @@ def run(args: argparse.Namespace) -> int:
     report = build_report(rows, out, title="woody line run", run_info=info)
     print(verdict_table(rows))
     print(f"\nbag: {bag}\nverdicts: {csv_path}\nreport: {report}\nnode logs: {logs}/")
+    print(cpu.summary(wall))
     if error:
         print(f"woody run: {error}", file=sys.stderr)
         return 1

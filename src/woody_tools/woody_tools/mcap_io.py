@@ -557,7 +557,7 @@ def bag_topics(path: str | os.PathLike) -> dict[str, str]:
 def bag_summary(path: str | os.PathLike) -> dict[str, Any]:
     """What a bag holds, cheaply for complete files.
 
-    ``{"path", "complete", "topics": {topic: {"type", "count", "qos"}}, "message_count",
+    ``{"path", "complete", "topics": {topic: {"type", "definition", "count", "qos"}}, "message_count",
     "start_ns", "end_ns", "duration_s", "metadata": {name: {...}}, "error"}`` where ``error``
     is the truncation message of an incomplete file (else ``None``). Counts of an
     incomplete file are those of its readable part.
@@ -573,7 +573,8 @@ def bag_summary(path: str | os.PathLike) -> dict[str, Any]:
             for cid, channel in summary.channels.items():
                 schema = summary.schemas.get(channel.schema_id)
                 result["topics"][channel.topic] = {
-                    "type": schema.name if schema else "", "count": counts.get(cid, 0),
+                    "type": schema.name if schema else "", "definition": _schema_text(schema),
+                    "count": counts.get(cid, 0),
                     "qos": channel.metadata.get("offered_qos_profiles", "")}
             result["message_count"] = stats.message_count if stats else sum(counts.values())
             result["start_ns"] = stats.message_start_time if stats else 0
@@ -583,7 +584,7 @@ def bag_summary(path: str | os.PathLike) -> dict[str, Any]:
                 result["metadata"][record.name] = dict(record.metadata)
         else:
             handle.seek(0)
-            schemas: dict[int, str] = {}
+            schemas: dict[int, Schema] = {}
             channels: dict[int, str] = {}
             count, start, end = 0, None, None
             try:
@@ -597,11 +598,12 @@ def bag_summary(path: str | os.PathLike) -> dict[str, Any]:
                         start = record.log_time if start is None else min(start, record.log_time)
                         end = record.log_time if end is None else max(end, record.log_time)
                     elif isinstance(record, Schema):
-                        schemas[record.id] = record.name
+                        schemas[record.id] = record
                     elif isinstance(record, Channel):
                         channels[record.id] = record.topic
+                        schema = schemas.get(record.schema_id)
                         result["topics"].setdefault(record.topic, {
-                            "type": schemas.get(record.schema_id, ""), "count": 0,
+                            "type": schema.name if schema else "", "definition": _schema_text(schema), "count": 0,
                             "qos": record.metadata.get("offered_qos_profiles", "")})
                     elif isinstance(record, Metadata):
                         result["metadata"][record.name] = dict(record.metadata)
@@ -614,6 +616,10 @@ def bag_summary(path: str | os.PathLike) -> dict[str, Any]:
         return result
     finally:
         handle.close()
+
+
+def _schema_text(schema: Schema | None) -> str:
+    return schema.data.decode(errors="replace") if schema is not None else ""
 
 
 def bag_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:

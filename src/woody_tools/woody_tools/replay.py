@@ -40,7 +40,8 @@ import threading
 import time
 from typing import Any
 
-from woody_tools.mcap_io import BagError, bag_summary, message_class, parse_qos_profiles, read_bag
+from woody_tools.mcap_io import (BagError, bag_summary, message_class, message_definition, parse_qos_profiles,
+                                 read_bag)
 
 CLOCK = "/clock"
 
@@ -91,6 +92,14 @@ def _qos_for(qos_yaml: str):
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
 
+def _outdated(topic_info: dict) -> bool:
+    """A woody_msgs topic whose recorded definition differs from the current one cannot be decoded by it."""
+    type_name = topic_info["type"]
+    if not type_name.startswith("woody_msgs/") or not topic_info.get("definition"):
+        return False
+    return topic_info["definition"] != message_definition(type_name)
+
+
 def run(args: argparse.Namespace) -> int:
     """Play the bag; see the module docstring for options and exit codes."""
     if not args.rate > 0:
@@ -120,6 +129,11 @@ def run(args: argparse.Namespace) -> int:
             types[topic] = message_class(in_bag[topic]["type"])
         except LookupError as exc:
             print(f"replay: skipping {topic}: {exc}", file=sys.stderr)
+            continue
+        if _outdated(in_bag[topic]):
+            del types[topic]
+            print(f"replay: skipping {topic}: recorded with an older {in_bag[topic]['type']} definition than this "
+                  "workspace's woody_msgs (replay the camera topics into the vision nodes instead)", file=sys.stderr)
     clock_mode = None if args.no_clock else ("recorded" if CLOCK in in_bag else "synthesised")
     if not types and clock_mode != "recorded":
         return _fail(f"{path}: nothing playable in the selected topics")

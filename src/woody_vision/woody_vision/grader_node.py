@@ -89,11 +89,12 @@ class Grader(Node):
 
     def on_tracks(self, msg: FilletTrackArray) -> None:
         if self.core is None:
-            self.side_checker.reject("no camera_info on /top_camera/depth/camera_info yet; tracks skipped")
+            if msg.tracks or msg.ended_ids:  # empty arrays (the segmenter learning its background) lose nothing
+                self.side_checker.reject("no camera_info on /top_camera/depth/camera_info yet; tracks skipped")
             return
         self.frame_id = msg.header.frame_id
-        tracks = [TrackObservation(t.id, t.lane, np.array([[p.x, p.y] for p in t.contour.points], np.int32), t.unseen)
-                  for t in msg.tracks if len(t.contour.points) >= 3]
+        tracks = [TrackObservation(t.id, t.lane, np.frombuffer(t.contour_uv, np.int32).reshape(-1, 2), t.unseen)
+                  for t in msg.tracks if len(t.contour_uv) >= 6 and len(t.contour_uv) % 2 == 0]
         self._publish(self.core.on_tracks(_seconds(msg.header.stamp), tracks, msg.ended_ids))
 
     def on_side_image(self, msg: Image) -> None:

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from woody_vision.flood import flood
+
 DEFAULT_HEIGHT_THRESHOLD_M = 0.005
 """Pixels rising more than this above the learned background belong to a fillet."""
 DEFAULT_MIN_AREA_PX = 500
@@ -153,37 +155,37 @@ def segment_height_map(height: np.ndarray, params: SegmentationParams = Segmenta
         origin = (x0 - 1, y0 - 1)
         height_roi = np.zeros(component.shape, np.float32)
         height_roi[1:-1, 1:-1] = height[y0:y1, x0:x1]
-        for part in _split_component(component, params):
-            blob = _make_blob(part, height_roi, origin, params.min_area_px)
+        for part, contour in _split_component(component, params):
+            blob = _make_blob(part, contour, height_roi, origin, params.min_area_px)
             if blob is not None:
                 blobs.append(blob)
     blobs.sort(key=lambda b: (b.centroid[1], b.centroid[0]))
     return blobs
 
 
-def _split_component(component: np.ndarray, params: SegmentationParams) -> list[np.ndarray]:
-    """Masks of the fillets in one connected component (itself if it looks like one fillet)."""
+def _split_component(component: np.ndarray, params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """Masks of the fillets in one connected component (itself if it looks like one fillet), each with its
+    outline when already known (None: to be traced)."""
     contour = _largest_contour(component)
     hull_area = cv2.contourArea(cv2.convexHull(contour))
     if hull_area <= 0.0 or cv2.contourArea(contour) / hull_area >= params.split_solidity:
-        return [component]
+        return [(component, contour)]
     distance = cv2.distanceTransform(component, cv2.DIST_L2, 5)
     cores = (distance > params.core_ratio * float(distance.max())).astype(np.uint8)
     n_cores, markers = cv2.connectedComponents(cores, connectivity=8, ltype=cv2.CV_32S)
     if n_cores <= 2:  # one core: one non-convex fillet, or two side by side along a long contact
         halves = _cut_between_notches(component, contour, params)
         if halves is None:
-            return [component]
+            return [(component, contour)]
         n_cores, markers = 3, halves
     labels = _flood(distance, markers, component)
-    return [np.where(labels == core, np.uint8(255), np.uint8(0)) for core in range(1, n_cores)]
+    return [(np.where(labels == core, np.uint8(255), np.uint8(0)), None) for core in range(1, n_cores)]
 
 
 NOTCH_DEPTH_RATIO = 0.1
 """A concavity counts as the notch between two touching fillets when it is this deep × sqrt(component area)."""
 FLOOD_LEVELS = 6
 """Immersion steps from the highest unlabelled pixel down to the border (~2 px apart on a fillet)."""
-_KERNEL_3X3 = np.ones((3, 3), np.uint8)
 
 
 def _cut_between_notches(component: np.ndarray, contour: np.ndarray, params: SegmentationParams) -> np.ndarray | None:
@@ -219,27 +221,17 @@ def _flood(distance: np.ndarray, markers: np.ndarray, component: np.ndarray, lev
 
     Each step admits the unlabelled component pixels at least that far from the
     border and grows every labelled region into them by 3×3 geodesic dilation,
-    so regions meet along the necks between fillets. (cv2.watershed is not used:
-    it floods by the difference between neighbouring pixels, not by elevation,
-    so on a distance relief it runs along the flat rim and takes the other
-    fillet's border.) Pixels reached by two regions at once go to the higher label.
+    so regions meet along the necks between fillets (:mod:`woody_vision.flood`).
+    (cv2.watershed is not used: it floods by the difference between
+    neighbouring pixels, not by elevation, so on a distance relief it runs along
+    the flat rim and takes the other fillet's border.) Pixels reached by two
+    regions at once go to the higher label.
     """
-    labels = markers.astype(np.uint8 if int(markers.max()) < 256 else np.uint16)
-    unlabelled = cv2.bitwise_and(component, cv2.compare(labels, 0, cv2.CMP_EQ))
+    unlabelled = cv2.bitwise_and(component, cv2.compare(markers, 0, cv2.CMP_EQ))
     if not cv2.countNonZero(unlabelled):
-        return labels
+        return markers
     top = cv2.minMaxLoc(distance, unlabelled)[1]
-    for level in np.linspace(top, 0.0, levels + 1)[1:]:
-        pending = cv2.bitwise_and(unlabelled, cv2.compare(distance, float(level), cv2.CMP_GE))
-        while cv2.countNonZero(pending):
-            grown = cv2.dilate(labels, _KERNEL_3X3)
-            reached = cv2.bitwise_and(pending, cv2.compare(grown, 0, cv2.CMP_GT))
-            if not cv2.countNonZero(reached):
-                break  # left for a lower level (not connected to any region yet)
-            cv2.copyTo(grown, reached, labels)
-            pending = cv2.subtract(pending, reached)
-        unlabelled = cv2.bitwise_and(unlabelled, cv2.compare(labels, 0, cv2.CMP_EQ))
-    return labels
+    return flood(distance, markers, component, np.linspace(top, 0.0, levels + 1)[1:])
 
 
 def _largest_contour(mask: np.ndarray) -> np.ndarray:
@@ -247,13 +239,14 @@ def _largest_contour(mask: np.ndarray) -> np.ndarray:
     return max(contours, key=len)
 
 
-def _make_blob(mask: np.ndarray, height_roi: np.ndarray, origin: tuple[int, int], min_area_px: int) -> Blob | None:
+def _make_blob(mask: np.ndarray, contour: np.ndarray | None, height_roi: np.ndarray, origin: tuple[int, int],
+               min_area_px: int) -> Blob | None:
     area = cv2.countNonZero(mask)
     if area < min_area_px:
         return None
     moments = cv2.moments(mask, binaryImage=True)
     ox, oy = origin
-    contour = _largest_contour(mask).reshape(-1, 2) + np.array([ox, oy], np.int32)
+    contour = (_largest_contour(mask) if contour is None else contour).reshape(-1, 2) + np.array([ox, oy], np.int32)
     bx, by, bw, bh = cv2.boundingRect(mask)
     return Blob(
         contour=contour.astype(np.int32),

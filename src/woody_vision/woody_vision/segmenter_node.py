@@ -8,11 +8,11 @@ line so a camera hiccup never takes the node down or corrupts its tracks.
 
 from __future__ import annotations
 
+import array
 import sys
 
 import cv2
 import numpy as np
-from geometry_msgs.msg import Point32, Polygon
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
@@ -94,16 +94,17 @@ class Segmenter(Node):
             self.background.reset()
             if self.tracker is not None:
                 self.tracker.reset()
-        if not self.background.ready:
-            self.background.add(depth)
-            return
-        if self.tracker is None:
-            self.checker.reject("no camera_info received yet on /top_camera/depth/camera_info; frame skipped")
+        out = FilletTrackArray(header=msg.header, image_width=msg.width, image_height=msg.height)
+        if not self.background.ready or self.tracker is None:
+            if not self.background.ready:
+                self.background.add(depth)
+            else:
+                self.checker.reject("no camera_info received yet on /top_camera/depth/camera_info; frame skipped")
+            self.tracks_pub.publish(out)  # every depth frame is answered: a paced line_sim waits for it
             return
         blobs = segment_depth(depth, self.background.depth, self.params)
         update = self.tracker.update(blobs)
-        out = FilletTrackArray(header=msg.header, image_width=msg.width, image_height=msg.height,
-                               ended_ids=[t.track_id for t in update.ended])
+        out.ended_ids = [t.track_id for t in update.ended]
         for track in update.active:
             blob = track.blob
             u, v, w, h = blob.bbox
@@ -111,7 +112,7 @@ class Segmenter(Node):
                 id=track.track_id, lane=max(track.lane, 0), centroid_u=float(blob.centroid[0]),
                 centroid_v=float(blob.centroid[1]), bbox_u=u, bbox_v=v, bbox_width=w, bbox_height=h,
                 area=float(blob.area_px), mean_height=float(blob.mean_height_m), age=track.age, unseen=track.unseen,
-                contour=Polygon(points=[Point32(x=x, y=y) for x, y in blob.contour.astype(float).tolist()])))
+                contour_uv=array.array("i", blob.contour.astype(np.int32).tobytes())))
         self.tracks_pub.publish(out)
         if self.debug_pub is not None:
             self._publish_debug(msg, update.active)
