@@ -60,6 +60,8 @@ class LineSim(Node):
         top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
         side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0, 400.0)
         side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
+        top_camera = declare(self, "top_camera", "default", "Top camera geometry preset: default (672x376 at "
+                             "0.75 m) or paper (the seed system's 960x696, 86.6 deg, 0.33 m).")
         self.realtime = declare(self, "realtime", False, "Pace the simulation to the wall clock.")
         self.duration = declare(self, "duration_s", 0.0, "Exit after this much sim time (0 = run until stopped).",
                                 0.0, 1e6)
@@ -71,7 +73,7 @@ class LineSim(Node):
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
 
         self.speed = fpm_to_mps(speed_fpm)
-        self.geometry = LineGeometry(lanes=lanes, side_lane=side_lane)
+        self.geometry = LineGeometry(lanes=lanes, side_lane=side_lane, **top_camera_preset(top_camera))
         self.world = LineWorld(self.geometry, PhysicsConfig(n_segments=segments, damping=damping))
         meshes, errors = load_mesh_set(mesh_spec)
         for error in errors:

@@ -12,7 +12,13 @@
    lanes. Classification is then reported on a DISJOINT test mesh set
    (different generated seeds), per speed and lane.
 
-Unless ``--dry-run``, the two values are written into the constants that are
+``--loo`` instead checks the threshold procedure itself on the reference
+(real) meshes: top-down runs at k ∈ {0, 100}, both speeds, three lanes; per
+speed, each mesh is held out once, the threshold is chosen on the others and
+scored on it, one vote per run (:mod:`woody_tools.evaluation`). It changes no
+default.
+
+Unless ``--dry-run`` (or ``--loo``), the two values are written into the constants that are
 the defaults everywhere (the nodes, `woody run`, `woody sweep`):
 ``woody_sim.fillet_model.DEFAULT_TOTAL_MASS`` and
 ``woody_vision.grading.DEFAULT_PHI_THRESHOLD`` (the source lines are
@@ -38,6 +44,8 @@ from woody_tools.experiment import RunSpec
 CALIBRATION_MESHES = "generated:8:9"
 """Calibration set (generated seeds 90000-90007); the sweep's default meshes (builtin, seeds 0-2 and 10000+) are disjoint."""
 TEST_MESHES = "generated:8:8"
+LOO_MESHES = "builtin"
+"""--loo uses the reference (non-generated) meshes of this set."""
 """Disjoint held-out set for the threshold's classification report (seeds 80000-80007)."""
 TARGET_DELTA = 0.25
 DELTA_RANGE = (0.20, 0.32)
@@ -47,7 +55,9 @@ COARSE_MASSES = (10.0, 20.0, 40.0, 80.0, 160.0)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--meshes", default=CALIBRATION_MESHES, help=f"calibration meshes (default {CALIBRATION_MESHES})")
+    parser.add_argument("--meshes", default=None,
+                        help=f"calibration meshes (default {CALIBRATION_MESHES}; with --loo: the reference meshes of "
+                             f"{LOO_MESHES})")
     parser.add_argument("--mass-meshes", type=int, default=4,
                         help="how many of the calibration meshes the mass search uses (default 4)")
     parser.add_argument("--test-meshes", default=TEST_MESHES,
@@ -60,6 +70,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
     parser.add_argument("--out", default="calibration-out", help="folder for calibration.json / calibration.md")
     parser.add_argument("--dry-run", action="store_true", help="print the results, do not change the defaults")
+    parser.add_argument("--loo", action="store_true",
+                        help="leave-one-mesh-out check of the threshold on the reference meshes (k 0/100, 100 and "
+                             "130 FPM, at --mass or the default M); writes loo.md / loo.json, changes no default")
 
 
 def _evaluate(runs: list[RunSpec], mesh_spec: str, jobs: int, desc: str) -> list[dict]:
@@ -144,6 +157,9 @@ def run(args: argparse.Namespace) -> int:
     jobs = args.jobs or os.cpu_count() or 1
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.loo:
+        return run_loo(args.meshes or LOO_MESHES, args.mass, jobs, out)
+    args.meshes = args.meshes or CALIBRATION_MESHES
     cal_names = list(sweep._load_meshes(args.meshes))
     test_names = list(sweep._load_meshes(args.test_meshes))
     overlap = set(cal_names) & set(test_names)
@@ -228,3 +244,39 @@ def _write_md(path: Path, report: dict) -> None:
         L += [f"| {t['speed_fpm']:g} | {t['lane']} | {t['accuracy'] * 100:.1f} % | {t['right']}/{t['total']} | {t['auc']:.3f} |"
               for t in report["test"]]
     path.write_text("\n".join(L) + "\n")
+
+
+def run_loo(spec: str, mass: float | None, jobs: int, out: Path) -> int:
+    """`woody calibrate --loo`: leave-one-mesh-out threshold check on the reference meshes of ``spec``."""
+    from woody_sim import fillet_model
+    from woody_tools import evaluation, sweep
+
+    names = [n for n in sweep._load_meshes(spec) if evaluation.mesh_set(n) == evaluation.SET_REFERENCE]
+    if len(names) < 2:
+        print(f"woody calibrate: --loo needs at least two reference (non-generated) meshes in '{spec}', got {names}",
+              file=sys.stderr)
+        return 2
+    mass = float(mass) if mass is not None else float(fillet_model.DEFAULT_TOTAL_MASS)
+    if mass < MIN_STABLE_MASS:
+        print(f"woody calibrate: --mass {mass:g} is below the stable minimum {MIN_STABLE_MASS:g} kg", file=sys.stderr)
+        return 2
+    runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False) for n in names for s in (100.0, 130.0)
+            for k in (evaluation.NORMAL_K, evaluation.SEVERE_K)]
+    rows = _evaluate(runs, spec, jobs, f"leave-one-out ({len(names)} reference meshes)")
+    units = evaluation.run_units(rows)
+    report: dict = {"meshes": names, "mass": mass, "speeds": {}}
+    lines = [f"# Leave-one-out over {len(names)} reference meshes (M = {mass:g} kg)\n"]
+    for speed in (100.0, 130.0):
+        folds = evaluation.leave_one_out([u for u in units if u.speed_fpm == speed])
+        total = evaluation.pooled(folds)
+        report["speeds"][f"{speed:g}"] = {
+            "folds": [{"held_out": f.held_out, "threshold": f.threshold, "train_balanced_accuracy":
+                       f.train_balanced_accuracy, "right": f.test.right, "total": f.test.total} for f in folds],
+            "right": total.right, "total": total.total, "accuracy": total.accuracy, "wilson95": total.interval}
+        lines.append(f"{speed:g} FPM: {total.text()}")
+        lines += [f"  held out {f.held_out}: threshold {f.threshold:.2f} from the others -> {f.test.text()}"
+                  for f in folds]
+    print("\n".join(lines))
+    (out / "loo.json").write_text(json.dumps(report, indent=2))
+    (out / "loo.md").write_text("\n".join(lines) + "\n")
+    return 0
