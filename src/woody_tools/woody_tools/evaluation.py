@@ -172,29 +172,42 @@ def report(rows: Sequence[dict], threshold: float) -> tuple[list[str], list[tupl
                                f"{np.mean(normal):.2f} / {np.mean(severe):.2f} = {phi_ratio(sel):.2f} "
                                f"({len({u.mesh for u in sel})} meshes)"))
     lines.append("")
-    lines += _loo_lines(units, speeds, checks)
+    lines += _loo_lines(rows, units, speeds, checks)
     return lines, checks
 
 
-def _loo_lines(units: Sequence[Unit], speeds: Sequence[float], checks: list) -> list[str]:
+def lane_score(rows: Sequence[dict], mesh: str, speed: float, threshold: float) -> tuple[int, int]:
+    """(right, total) over the scored normal and severe lanes of one mesh at one speed (lanes not independent)."""
+    sel = [r for r in rows if r["mesh"] == mesh and math.isclose(r["speed_fpm"], speed)
+           and r.get("status") == "scored" and math.isfinite(r["phi"])]
+    normal = [r["phi"] for r in sel if math.isclose(r["k"], NORMAL_K)]
+    severe = [r["phi"] for r in sel if math.isclose(r["k"], SEVERE_K)]
+    _, right, total = accuracy(normal, severe, threshold)
+    return right, total
+
+
+def _loo_lines(rows: Sequence[dict], units: Sequence[Unit], speeds: Sequence[float], checks: list) -> list[str]:
     lines = ["## Leave-one-out over the reference meshes\n",
              "Per speed: the threshold is the best balanced-accuracy cut on the runs of all reference meshes but one, "
              "and is scored on the held-out mesh's runs; every reference mesh is held out once.\n",
-             "| FPM | held-out mesh | threshold from the others | their balanced accuracy | held-out accuracy |",
-             "|---|---|---|---|---|"]
+             "| FPM | held-out mesh | threshold from the others | their balanced accuracy | held-out accuracy | "
+             "held-out lanes |",
+             "|---|---|---|---|---|---|"]
     for speed in speeds:
         ref = [u for u in units if mesh_set(u.mesh) == SET_REFERENCE and math.isclose(u.speed_fpm, speed)]
         folds = leave_one_out(ref)
-        for fold in folds:
+        lanes = [lane_score(rows, fold.held_out, speed, fold.threshold) for fold in folds]
+        for fold, (right, n) in zip(folds, lanes):
             lines.append(f"| {speed:g} | {fold.held_out} | {fold.threshold:.2f} | "
-                         f"{fold.train_balanced_accuracy * 100:.1f} % | {fold.test.text()} |")
+                         f"{fold.train_balanced_accuracy * 100:.1f} % | {fold.test.text()} | {right}/{n} |")
         if folds:
             total = pooled(folds)
-            lines.append(f"| {speed:g} | **all folds** | — | — | {total.text()} |")
+            lines.append(f"| {speed:g} | **all folds** | — | — | {total.text()} | "
+                         f"{sum(r for r, _ in lanes)}/{sum(n for _, n in lanes)} |")
             if math.isclose(speed, 100.0):
                 checks.append(("reference meshes, 100 FPM: leave-one-out accuracy ≥ 97 %", total.accuracy >= 0.97,
                                total.text()))
     if len(lines) == 4:
-        lines.append("| — | fewer than two reference meshes with k = 0 and k = 100 runs | — | — | — |")
+        lines.append("| — | fewer than two reference meshes with k = 0 and k = 100 runs | — | — | — | — |")
     lines.append("")
     return lines
