@@ -22,7 +22,7 @@ from woody_msgs.msg import FilletSpawn
 from woody_msgs.srv import SpawnFillet
 
 from woody_sim.fillet_model import DEFAULT_TOTAL_MASS, MIN_STABLE_MASS
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps
+from woody_sim.line_geometry import LineGeometry, fpm_to_mps, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.rendering import RenderProcess, camera_info_fields
