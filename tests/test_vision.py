@@ -17,7 +17,8 @@ import pytest
 from woody_vision.camera_model import LaneLayout, lane_center_u
 from woody_vision.frame_checks import RESIZE_CONFIRM_FRAMES, FrameChecker, FrameError, image_to_array
 from woody_vision.grading import GradingRules
-from woody_vision.segmentation import Blob, BackgroundModel, SegmentationParams, height_map, segment_depth
+from woody_vision.segmentation import (DEFAULT_HEIGHT_THRESHOLD_M, Blob, BackgroundModel, SegmentationParams,
+                                       height_map, segment_depth)
 from woody_vision.synthetic import (
     DEFAULT_CAMERA_HEIGHT_M,
     DEFAULT_TOP_K,
@@ -44,7 +45,7 @@ def mask_components(fillets, t: float = 0.0) -> int:
     """Connected components of the thresholded, opened mask: >1 fillet per component means they touch."""
     scene = TopScene(fillets)
     height = height_map(scene.render(t)[1], scene.background_depth())
-    mask = cv2.morphologyEx((height > 0.005).astype(np.uint8), cv2.MORPH_OPEN,
+    mask = cv2.morphologyEx((height > DEFAULT_HEIGHT_THRESHOLD_M).astype(np.uint8), cv2.MORPH_OPEN,
                             cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
     count, _, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     return sum(1 for i in range(1, count) if stats[i, cv2.CC_STAT_AREA] >= 500)
@@ -55,7 +56,7 @@ def fillet_masks(fillets, t: float) -> list[np.ndarray]:
     out = []
     for fillet in fillets:
         scene = TopScene([fillet])
-        out.append((scene.background_depth() - scene.render(t)[1]) > 0.005)
+        out.append((scene.background_depth() - scene.render(t)[1]) > DEFAULT_HEIGHT_THRESHOLD_M)
     return out
 
 
@@ -129,6 +130,31 @@ def test_side_by_side_fillets_across_lanes_split_into_two_blobs_and_tracks(overl
         for track in update.active:
             ids_per_lane[track.lane].add(track.track_id)
     assert ids_per_lane == {0: {0}, 1: {1}} or ids_per_lane == {0: {1}, 1: {0}}
+
+
+@pytest.mark.parametrize("mesh", [0, 1, 2])
+def test_a_rigid_fillet_keeps_its_segmented_outline_as_it_passes_the_roller_edge(mesh):
+    """Past the edge the background is the floor, so rim thinner than the height threshold, hidden on the belt,
+    would appear there and grow the outline of a fillet that does not bend at all (the old Φ floor)."""
+    from woody_sim.line_geometry import LineGeometry
+    from woody_sim.rendering import LineRenderer, flat_poses, load_reference_visuals
+
+    geometry = LineGeometry()
+    visuals, offsets = load_reference_visuals(mesh, 40)
+    renderer = LineRenderer(geometry, render_side=False)
+    renderer.add_fillet(0, 1, visuals)
+    background = renderer.render_top({})[1]
+
+    def area(centre_x: float, params: SegmentationParams) -> int:
+        depth = renderer.render_top({0: flat_poses(offsets, centre_x, geometry.lane_y(1))})[1]
+        (blob,) = segment_depth(depth, background, params)
+        return blob.area_px
+
+    def growth(params: SegmentationParams) -> float:  # fully on the belt, then ~5 cm overhanging, still flat
+        return area(-0.04, params) / area(-0.15, params) - 1.0
+
+    assert abs(growth(SegmentationParams())) < 0.003
+    assert growth(SegmentationParams(height_threshold_m=0.005)) > 0.005
 
 
 def test_single_fillets_are_never_split_while_crossing_the_edge():
