@@ -89,8 +89,8 @@ def test_classification_follows_the_rules():
 def test_unscored_verdict_when_the_track_ends_in_the_window():
     grader = FilletGrader(EDGE, watched_lane=WATCHED)
     shapes = contours(90)
-    opens = next(i for i, c in enumerate(shapes) if c[:, 1].max() >= EDGE - 2.0)
-    out = feed(grader, 3, WATCHED, shapes[: opens + 2], end=True)
+    closes = int(round(closing_stamp(shapes) * FPS))
+    out = feed(grader, 3, WATCHED, shapes[: closes - 1], end=True)  # the window is open well before it closes
     ((_, verdict),) = out  # unscored watched-lane verdicts are not held for the side view
     assert verdict.label == "unscored" and verdict.grade == "" and not verdict.scored
     assert verdict.shape.reason == REASON_LOST_IN_WINDOW and verdict.lane == WATCHED

@@ -111,7 +111,8 @@ def test_bad_parameters_are_refused_with_the_reason(tmp_path):
 
     cases = {
         "line_sim": [("line_speed_fpm", "0.0", "line_speed_fpm"), ("lanes", "7", "lanes"),
-                     ("k_values", "[-1.0]", "k_values"), ("meshes", str(tmp_path / "none"), "none")],
+                     ("k_values", "[-1.0]", "k_values"), ("meshes", str(tmp_path / "none"), "none"),
+                     ("top_camera", "wide", "known: default, paper")],
         "segmenter": [("min_area_px", "0", "min_area_px")],
         "grader": [("threshold", "-1.0", "threshold"), ("side_lane", "4", "side_lane")],
         "reject_gate": [("gate_distance_m", "[0.5,0.6]", "gate_distance_m")],

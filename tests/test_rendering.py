@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
-from woody_sim.line_geometry import LineGeometry
+from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.rendering import (LineRenderer, RenderProcess, camera_info_fields, draped_poses, flat_poses,
                                  load_reference_visuals)
 
@@ -115,3 +117,23 @@ def test_render_process_knows_when_the_side_view_is_empty(geometry, reference):
         assert remote.side_view_occupied({0: flat_poses(offsets, -0.1, geometry.lane_y(lane))})
         remote.remove_fillet(0)
         assert not remote.side_view_occupied(other_lane)
+
+
+def test_paper_top_camera_preset_is_the_seed_systems_camera():
+    paper = LineGeometry(**top_camera_preset("paper"))
+    cam = paper.top_camera()
+    # the seed's 960 x 696 with its 86.6 deg over the 696-px axis; flow runs down our rows, so 696 wide, 960 tall
+    assert (cam.width, cam.height) == (696, 960)
+    assert 2.0 * math.degrees(math.atan(cam.width / 2.0 / cam.fx)) == pytest.approx(86.6)
+    assert cam.fx == cam.fy and paper.top_height == pytest.approx(0.33)
+    across_m = cam.width / cam.fx * paper.top_height
+    assert across_m == pytest.approx(2 * 0.33 * math.tan(math.radians(43.3)))
+    assert across_m > paper.lanes * paper.lane_pitch  # all three lanes in view
+    rgb, depth = LineRenderer(paper, render_side=False).render_top({})
+    assert rgb.shape == (960, 696, 3) and depth.shape == (960, 696)
+    assert depth[480, 348] == pytest.approx(0.33, abs=0.001)
+    edge = int(paper.top_edge_row())
+    assert depth[edge - 2, 348] < 0.34 and depth[edge + 60, 348] > 0.33 + 0.3  # belt, then the floor
+    assert top_camera_preset("default") == {} and LineGeometry(**top_camera_preset("default")) == LineGeometry()
+    with pytest.raises(ValueError, match="known: default, paper"):
+        top_camera_preset("wide")

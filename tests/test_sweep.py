@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from woody_tools import results
+from woody_tools import results, traces
 from woody_tools.experiment import RUN_COLUMNS
 
 MESHES = "generated:2:7"
-ARGS = ["sweep", "--meshes", MESHES, "--k", "0,100", "--speeds", "100", "--jobs", "2"]
+ARGS = ["sweep", "--meshes", MESHES, "--k", "0,100", "--speeds", "100", "--jobs", "2", "--traces"]
 
 
 def _woody(*args: str) -> subprocess.CompletedProcess:
@@ -53,7 +53,8 @@ def test_sweep_cli_rows_report_resume(tmp_path):
     assert sum(phi[0.0]) / 6 > sum(phi[100.0]) / 6
 
     md = (out / "results.md").read_text()
-    for heading in ("## Side view", "## Top view", "## Lanes", "## Targets", "## Throughput"):
+    for heading in ("## Side view", "## Top view", "## Lanes", "## Targets", "## Throughput",
+                    "## Classification per mesh set", "## Leave-one-out over the reference meshes"):
         assert heading in md
     for paper_figure in ("0.520", "0.783", "19.12 ± 5.67", "5.40 ± 2.54", "19.06 ± 5.53", "5.28 ± 2.56"):
         assert paper_figure in md
@@ -61,6 +62,18 @@ def test_sweep_cli_rows_report_resume(tmp_path):
     assert "**PASS**" in md or "**MISS**" in md
     for name in results.PLOTS:
         assert (out / name).stat().st_size > 1000
+
+    # --traces: every scored lane's window frame by frame, and one plot per mesh and speed
+    trace_rows = traces.join(out)
+    assert {(r["mesh"], r["k"], int(r["lane"])) for r in trace_rows} == {(m, k, lane) for m, k, _, lane in keys}
+    for r in rows:
+        window = [t for t in trace_rows if t["mesh"] == r["mesh"] and t["k"] == float(r["k"])
+                  and int(t["lane"]) == int(r["lane"])]
+        assert max(t["phi"] for t in window) == pytest.approx(float(r["phi"]), rel=1e-5)
+        assert max(t["hu_term"] for t in window) == pytest.approx(float(r["hu_term"]), rel=1e-5)
+        assert window[-1]["t_rel_s"] == 0.0
+    for mesh in ("generated-70000", "generated-70001"):
+        assert (out / traces.TRACE_DIR / f"{mesh}_100fpm.png").stat().st_size > 5000
 
     # resumable: a second invocation runs nothing and leaves the rows alone
     before = (out / "runs.csv").read_text()
@@ -78,6 +91,10 @@ def test_sweep_cli_rows_report_resume(tmp_path):
     again = _rows(out / "runs.csv")
     assert len(again) == 12
     assert {(r["mesh"], float(r["k"]), int(r["lane"])) for r in again} == {(m, k, lane) for m, k, _, lane in keys}
+
+    # one top camera per folder: another camera is refused before anything runs
+    other = _woody(*ARGS, "--out", str(out), "--top-camera", "paper")
+    assert other.returncode == 2 and "use another --out" in other.stderr
 
 
 def test_threshold_and_roc_helpers():

@@ -33,6 +33,24 @@ def fpm_to_mps(speed_fpm: float) -> float:
     return float(speed_fpm) * FPM_TO_MPS
 
 
+TOP_CAMERA_PRESETS: dict[str, dict[str, float | int]] = {
+    "default": {},
+    # The seed system's top camera (reference/seed-system.md "Cameras"): 960 x 696 px, 86.6 deg field of view over
+    # its 696-px axis, ~0.33 m above the belt, nadir. Its flow runs along the 960 px; here flow runs down the image
+    # rows, so the image is 696 wide (across the belt, the 86.6 deg axis) and 960 tall. The optical axis stays
+    # top_center_x, 0.20 m upstream of the roller edge (the seed's position along the flow is not known).
+    "paper": {"top_width": 696, "top_height_px": 960, "top_hfov": math.radians(86.6), "top_height": 0.33},
+}
+"""Named top-camera geometries: LineGeometry top_* field overrides."""
+
+
+def top_camera_preset(name: str) -> dict[str, float | int]:
+    """The LineGeometry field overrides of a named top camera; ValueError names the known presets."""
+    if name not in TOP_CAMERA_PRESETS:
+        raise ValueError(f"unknown top camera preset {name!r}; known: {', '.join(TOP_CAMERA_PRESETS)}")
+    return dict(TOP_CAMERA_PRESETS[name])
+
+
 @dataclass(frozen=True)
 class PinholeCamera:
     """An ideal pinhole camera: intrinsics plus its pose in the world frame."""

@@ -22,7 +22,7 @@ from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
 
 from woody_common.calibration import load_calibration
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps
+from woody_sim.line_geometry import LineGeometry, fpm_to_mps, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.rendering import RenderProcess, camera_info_fields
@@ -68,6 +68,8 @@ class LineSim(Node):
         side_idle = declare(self, "side_idle_rate_hz", 2.0, "Side frame rate while no fillet of the watched lane "
                             "is in its view (frames just after one leaves go at side_rate_hz).", 0.1, 400.0)
         side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
+        top_camera = declare(self, "top_camera", "default", "Top camera geometry preset: default (672x376 at "
+                             "0.75 m) or paper (the seed system's 960x696, 86.6 deg, 0.33 m).")
         self.realtime = declare(self, "realtime", False, "Pace the simulation to the wall clock.")
         self.duration = declare(self, "duration_s", 0.0, "Exit after this much sim time (0 = run until stopped).",
                                 0.0, 1e6)
@@ -82,9 +84,9 @@ class LineSim(Node):
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
 
         self.speed = fpm_to_mps(speed_fpm)
-        self.geometry = LineGeometry(lanes=lanes, side_lane=side_lane)
+        self.geometry = LineGeometry(lanes=lanes, side_lane=side_lane, **top_camera_preset(top_camera))
         self.world = LineWorld(self.geometry, PhysicsConfig(
-            n_segments=segments, damping=damping, friction_static=mu_static, friction_dynamic=mu_dynamic)))
+            n_segments=segments, damping=damping, friction_static=mu_static, friction_dynamic=mu_dynamic))
         meshes, errors = load_mesh_set(mesh_spec)
         for error in errors:
             self.get_logger().error(error)

@@ -17,6 +17,12 @@ sets, targets, achieved figures) are written to ``config/calibration.yaml``
 (:mod:`woody_common.calibration`), which line_sim, the grader, `woody run`
 and `woody sweep` load. The search log goes to ``--out``/calibration.json and
 calibration.md.
+
+``--loo`` instead checks the threshold procedure itself on the reference
+(real) meshes: top-down runs at k ∈ {0, 100}, both speeds, three lanes; per
+speed, each mesh is held out once, the threshold is chosen on the others and
+scored on it, one vote per run (:mod:`woody_tools.evaluation`). It writes no
+calibration.
 """
 
 from __future__ import annotations
@@ -38,6 +44,8 @@ from woody_tools.experiment import RunSpec
 CALIBRATION_MESHES = "generated:8:9"
 """Calibration set (generated seeds 90000-90007); the sweep's default meshes (builtin, seeds 0-2 and 10000+) are disjoint."""
 TEST_MESHES = "generated:8:8"
+LOO_MESHES = "builtin"
+"""--loo uses the reference (non-generated) meshes of this set."""
 """Disjoint held-out set for the threshold's classification report (seeds 80000-80007)."""
 SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
 SPEEDS = (100.0, 130.0)
@@ -51,7 +59,9 @@ def _floats(text: str) -> list[float]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--meshes", default=CALIBRATION_MESHES, help=f"calibration meshes (default {CALIBRATION_MESHES})")
+    parser.add_argument("--meshes", default=None,
+                        help=f"calibration meshes (default {CALIBRATION_MESHES}; with --loo: the reference meshes of "
+                             f"{LOO_MESHES})")
     parser.add_argument("--fit-meshes", type=int, default=2,
                         help="how many of the calibration meshes the physics fit uses (default 2)")
     parser.add_argument("--test-meshes", default=TEST_MESHES,
@@ -65,6 +75,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="calibration-out", help="folder for calibration.json / calibration.md")
     parser.add_argument("--calibration", default=None, help="calibration file to write (default config/calibration.yaml)")
     parser.add_argument("--dry-run", action="store_true", help="print the results, do not write the calibration")
+    parser.add_argument("--loo", action="store_true",
+                        help="leave-one-mesh-out check of the threshold on the reference meshes (k 0/100, 100 and "
+                             "130 FPM, with the calibrated physics); writes loo.md / loo.json, writes no calibration")
 
 
 def _evaluate(runs: list[RunSpec], mesh_spec: str, jobs: int, desc: str) -> list[dict]:
@@ -187,6 +200,9 @@ def run(args: argparse.Namespace) -> int:
     jobs = args.jobs or os.cpu_count() or 1
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.loo:
+        return run_loo(args.meshes or LOO_MESHES, jobs, out)
+    args.meshes = args.meshes or CALIBRATION_MESHES
     cal_names = list(sweep._load_meshes(args.meshes))
     test_names = list(sweep._load_meshes(args.test_meshes))
     if set(cal_names) & set(test_names):
@@ -243,3 +259,35 @@ def _write_md(path: Path, report: dict) -> None:
         lines += [f"| {t['speed_fpm']:g} | {t['lane']} | {t['accuracy'] * 100:.1f} % | {t['right']}/{t['total']} | "
                   f"{t['auc']:.3f} |" for t in report["test"]]
     path.write_text("\n".join(lines) + "\n")
+
+
+def run_loo(spec: str, jobs: int, out: Path) -> int:
+    """`woody calibrate --loo`: leave-one-mesh-out threshold check on the reference meshes of ``spec``."""
+    from woody_tools import evaluation, sweep
+
+    names = [n for n in sweep._load_meshes(spec) if evaluation.mesh_set(n) == evaluation.SET_REFERENCE]
+    if len(names) < 2:
+        print(f"woody calibrate: --loo needs at least two reference (non-generated) meshes in '{spec}', got {names}",
+              file=sys.stderr)
+        return 2
+    mass = load_calibration().total_mass_kg
+    runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False) for n in names for s in (100.0, 130.0)
+            for k in (evaluation.NORMAL_K, evaluation.SEVERE_K)]
+    rows = _evaluate(runs, spec, jobs, f"leave-one-out ({len(names)} reference meshes)")
+    units = evaluation.run_units(rows)
+    report: dict = {"meshes": names, "mass": mass, "speeds": {}}
+    lines = [f"# Leave-one-out over {len(names)} reference meshes (M = {mass:g} kg)\n"]
+    for speed in (100.0, 130.0):
+        folds = evaluation.leave_one_out([u for u in units if u.speed_fpm == speed])
+        total = evaluation.pooled(folds)
+        report["speeds"][f"{speed:g}"] = {
+            "folds": [{"held_out": f.held_out, "threshold": f.threshold, "train_balanced_accuracy":
+                       f.train_balanced_accuracy, "right": f.test.right, "total": f.test.total} for f in folds],
+            "right": total.right, "total": total.total, "accuracy": total.accuracy, "wilson95": total.interval}
+        lines.append(f"{speed:g} FPM: {total.text()}")
+        lines += [f"  held out {f.held_out}: threshold {f.threshold:.2f} from the others -> {f.test.text()}"
+                  for f in folds]
+    print("\n".join(lines))
+    (out / "loo.json").write_text(json.dumps(report, indent=2))
+    (out / "loo.md").write_text("\n".join(lines) + "\n")
+    return 0

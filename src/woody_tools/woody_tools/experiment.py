@@ -19,7 +19,7 @@ need:
 The side tracker gets the empty-scene side frame as its background (the
 fillets are already in the side camera's view at spawn, so learning the
 background from the first frame, as the node does on a line that starts
-empty, would bake a fillet into it). One LineRenderer per lane count is kept
+empty, would bake a fillet into it). One LineRenderer per geometry (lane count, top camera) is kept
 per process and reused (its construction renders both backgrounds); the
 pybullet world is rebuilt per run (cheap) so every run starts identically.
 """
@@ -31,8 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps
 from woody_common.calibration import load_calibration
+from woody_sim.line_geometry import LineGeometry, fpm_to_mps, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
 from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer
@@ -58,7 +58,7 @@ SIDE_DONE_DISTANCE = 0.12
 the centroid only moves away from the axle from then on (it falls), so no later frame can lower the MDM."""
 MAX_SIM_S = 4.0
 
-_RENDERERS: dict[tuple[int, bool, bool], tuple[LineRenderer, np.ndarray | None, np.ndarray | None]] = {}
+_RENDERERS: dict[tuple[LineGeometry, bool, bool], tuple[LineRenderer, np.ndarray | None, np.ndarray | None]] = {}
 
 
 @dataclass(frozen=True)
@@ -72,6 +72,8 @@ class RunSpec:
     mass: float | None = None
     side: bool = True
     top: bool = True
+    top_camera: str = "default"
+    """Top camera preset (woody_sim.line_geometry.TOP_CAMERA_PRESETS)."""
     damping: float | None = None
     """Hinge damper c; None = the calibrated one (config/calibration.yaml)."""
     friction_static: float | None = None
@@ -90,7 +92,7 @@ class RunSpec:
 
 
 def _renderer(geometry: LineGeometry, top: bool, side: bool):
-    key = (geometry.lanes, top, side)
+    key = (geometry, top, side)
     if key not in _RENDERERS:
         renderer = LineRenderer(geometry, render_top=top, render_side=side)
         top_bg = renderer.render_top({})[1] if top else None
@@ -104,12 +106,12 @@ def _renderer(geometry: LineGeometry, top: bool, side: bool):
 def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None = None,
                  side_rate_hz: float = SIDE_RATE_HZ, top_start_x: float | None = TOP_START_X,
                  stats: dict | None = None) -> list[dict]:
-    """Simulate one run and return one row per lane (RUN_COLUMNS).
+    """Simulate one run and return one row per lane (RUN_COLUMNS, and "trace": the lane's Φ window per frame).
 
     ``top_start_x=None`` renders top frames from the start; ``stats`` (if given)
     receives frame counts.
     """
-    geometry = LineGeometry(lanes=spec.lanes, spawn_x=SPAWN_X)
+    geometry = LineGeometry(lanes=spec.lanes, spawn_x=SPAWN_X, **top_camera_preset(spec.top_camera))
     renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side)
     calibration = load_calibration()
     world = LineWorld(geometry, config or calibrated_config(calibration, **spec.physics_overrides()))
@@ -198,6 +200,10 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
 
 
 def _shape_row(graded) -> dict:
+    """The lane's top-down columns, plus under "trace" its window frame by frame (time relative to the close)."""
     shape = graded.shape
+    close = shape.stamp if shape.stamp is not None else math.nan
+    trace = [{"t_rel_s": f.stamp - close, "phi": f.phi, "hu_term": f.hu_term, "solidity_term": f.solidity_term}
+             for f in shape.trace]
     return {"phi": float(shape.phi), "hu_term": float(shape.hu_term), "solidity_term": float(shape.solidity_term),
-            "status": shape.status, "reason": shape.reason}
+            "status": shape.status, "reason": shape.reason, "trace": trace}

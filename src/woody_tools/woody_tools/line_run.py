@@ -17,6 +17,7 @@ from datetime import datetime
 from pathlib import Path
 
 from woody_tools.cpu_usage import CpuAccounting
+from woody_sim.line_geometry import TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
 from woody_tools.graph import NodeProcess, lease_domain, wait_for
 from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
 
@@ -40,6 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--realtime", action="store_true", help="pace the simulation to the wall clock")
     parser.add_argument("--threshold", type=float, default=None, help="Φ threshold of the grader (default: its own)")
     parser.add_argument("--side-rate", type=float, default=60.0, help="side camera frame rate, Hz (default 60)")
+    parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
+                        help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
+                             "86.6 deg, 0.33 m)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
 
 
@@ -139,8 +143,10 @@ def run(args: argparse.Namespace) -> int:
         "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
         "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
         "max_lead_s": MAX_LEAD_S,
+        "top_camera": args.top_camera,
     }
-    vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes}
+    camera_height = LineGeometry(**top_camera_preset(args.top_camera)).top_height
+    vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes, "camera_height_m": camera_height}
     grader_params = dict(vision_params)
     if args.threshold is not None:
         grader_params["threshold"] = args.threshold

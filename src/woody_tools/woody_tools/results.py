@@ -180,6 +180,7 @@ def _pf(ok: bool | None) -> str:
 def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path:
     """Write out/results.md and out/*.png from out/runs.csv; with ``docs`` also docs/results.md + docs/results/."""
     from woody_common.calibration import load_calibration
+    from woody_tools import evaluation
 
     out = Path(out)
     rows = load_rows(out / "runs.csv")
@@ -195,7 +196,9 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
     _plots(rows, out, speeds, ks, lanes, threshold)
     L: list[str] = []
     L.append("# Reproducing the paper: drop-test sweep results\n")
-    L.append(f"{len(meshes)} meshes × {len(ks)} k × {len(speeds)} speeds × {len(lanes)} lanes = "
+    n_ref = sum(evaluation.mesh_set(m) == evaluation.SET_REFERENCE for m in meshes)
+    L.append(f"{len(meshes)} meshes ({n_ref} reference (real), {len(meshes) - n_ref} generated) × {len(ks)} k × "
+             f"{len(speeds)} speeds × {len(lanes)} lanes = "
              f"{len(rows)} fillet rows ({sum(r['status'] == 'scored' for r in rows)} with a scored Φ, "
              f"{len(side_rows)} with side-view metrics). Total mass M = "
              f"{', '.join(f'{m:g}' for m in masses)} kg; Φ threshold {threshold:g} "
@@ -329,8 +332,10 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
     L.append("")
 
     # ---- classification
-    L.append(f"## Classification: normal (k = 0) vs severe (k = 100) at Φ threshold {threshold:g}\n")
+    L.append(f"## Classification per fillet: normal (k = 0) vs severe (k = 100) at Φ threshold {threshold:g}\n")
     L.append(_heldout_note(meshes))
+    L.append("Every lane counts here, pooled over all mesh sets; lanes of one run are not independent, see the "
+             "per-set section below for one vote per run with confidence intervals.\n")
     L.append("| FPM | lane | accuracy | right / total | ROC AUC | best possible threshold here (bal. acc.) |")
     L.append("|---|---|---|---|---|---|")
     for speed in speeds:
@@ -347,6 +352,9 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
                 checks.append((f"accuracy {speed:g} FPM lane {lane} ≥ {ACCURACY_MIN * 100:.0f} %", acc >= ACCURACY_MIN,
                                f"{acc * 100:.1f} % ({right}/{total}), AUC {auc:.3f}"))
     L.append("")
+    set_lines, set_checks = evaluation.report(rows, threshold)
+    L += set_lines
+    checks += set_checks
 
     # ---- checks
     L.append("## Targets\n")

@@ -8,6 +8,8 @@ watches, empty elsewhere. Rows are appended to ``runs.csv`` as each run
 finishes, so a killed sweep loses at most the runs in flight; a rerun skips
 every run whose rows are all there (a run with missing lane rows is redone).
 At the end ``results.md`` and the plots are (re)built from the whole CSV.
+With ``--traces`` every run also writes its lanes' Φ windows frame by frame
+(:mod:`woody_tools.traces`), and a run counts as done only with its trace.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import sys
 import time
 from pathlib import Path
 
+from woody_sim.line_geometry import TOP_CAMERA_PRESETS
 from woody_tools.experiment import RUN_COLUMNS, RunSpec
 
 TOP_K = (0.0, 20.0, 40.0, 60.0, 80.0, 100.0)
@@ -61,6 +64,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="total chain mass M in kg (default: the calibrated one, config/calibration.yaml)")
     parser.add_argument("--no-side", action="store_true", help="skip the side view (top-down Φ only)")
     parser.add_argument("--no-report", action="store_true", help="only run; do not rebuild results.md and plots")
+    parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
+                        help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
+                             "86.6 deg, 0.33 m); one camera per --out folder")
+    parser.add_argument("--traces", action="store_true",
+                        help="also write Φ, Hu and solidity terms of every window frame per fillet: traces.csv and "
+                             "traces/<mesh>_<speed>fpm.png (runs already done without a trace are redone)")
     parser.add_argument("--docs", default=None, metavar="DIR",
                         help="also write results.md to DIR/results.md and the plots to DIR/results/ (e.g. docs)")
 
@@ -96,8 +105,9 @@ def _fmt(value) -> object:
     return value
 
 
-def completed_runs(path: Path, lanes: int) -> set[tuple]:
-    """Keys of runs with all their lane rows in the CSV; rows of incomplete runs are dropped from the file."""
+def completed_runs(path: Path, lanes: int, traced: Path | None = None) -> set[tuple]:
+    """Keys of runs with all their lane rows in the CSV (and, with ``traced`` = the sweep folder, their trace
+    file); rows of other runs are dropped from the file so they are redone cleanly."""
     rows = read_rows(path)
     by_run: dict[tuple, list[dict]] = {}
     for row in rows:
@@ -107,6 +117,10 @@ def completed_runs(path: Path, lanes: int) -> set[tuple]:
             continue
         by_run.setdefault(key, []).append(row)
     done = {key for key, rs in by_run.items() if {int(r["lane"]) for r in rs} >= set(range(lanes))}
+    if traced is not None:
+        from woody_tools.traces import run_file
+
+        done = {key for key in done if run_file(traced, key[0], key[1], key[2], key[3]).exists()}
     keep = [r for key, rs in by_run.items() if key in done for r in rs]
     if len(keep) != len(rows):
         _write_rows(path, keep, "w")
@@ -146,9 +160,18 @@ def _work(run: RunSpec) -> list[dict]:
                  "status": "error", "reason": f"{type(exc).__name__}: {exc}"} for lane in range(run.lanes)]
 
 
-def run_grid(runs: list[RunSpec], mesh_spec: str, jobs: int, csv_path: Path, desc: str = "sweep") -> tuple[int, float]:
-    """Evaluate the runs in parallel, appending rows as they finish; returns (rows written, wall s)."""
+def run_grid(runs: list[RunSpec], mesh_spec: str, jobs: int, csv_path: Path, desc: str = "sweep",
+             trace_out: Path | None = None) -> tuple[int, float]:
+    """Evaluate the runs in parallel, appending rows as they finish (and their traces to ``trace_out`` if given);
+    returns (rows written, wall s)."""
     from tqdm import tqdm
+
+    from woody_tools.traces import write_run
+
+    def save(rows: list[dict]) -> None:
+        _write_rows(csv_path, rows, "a")
+        if trace_out is not None:
+            write_run(trace_out, rows)
 
     global _MESHES
     if not runs:
@@ -160,7 +183,7 @@ def run_grid(runs: list[RunSpec], mesh_spec: str, jobs: int, csv_path: Path, des
         if jobs <= 1:
             for run in runs:
                 rows = _work(run)
-                _write_rows(csv_path, rows, "a")
+                save(rows)
                 written += len(rows)
                 bar.update(1)
         else:
@@ -169,7 +192,7 @@ def run_grid(runs: list[RunSpec], mesh_spec: str, jobs: int, csv_path: Path, des
             ctx = mp.get_context("fork")
             with ctx.Pool(jobs, initializer=_worker_init, initargs=(mesh_spec,), maxtasksperchild=200) as pool:
                 for rows in pool.imap_unordered(_work, runs, chunksize=1):
-                    _write_rows(csv_path, rows, "a")
+                    save(rows)
                     written += len(rows)
                     bar.update(1)
                     bar.set_postfix_str(f"{written / max(time.perf_counter() - start, 1e-9) * 60:.0f} evals/min")
@@ -177,9 +200,9 @@ def run_grid(runs: list[RunSpec], mesh_spec: str, jobs: int, csv_path: Path, des
 
 
 def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
-         side: bool = True) -> list[RunSpec]:
+         side: bool = True, top_camera: str = "default") -> list[RunSpec]:
     """Runs ordered so that partial results already span the grid (k and speed vary fastest)."""
-    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side)
+    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side, top_camera=top_camera)
             for name in mesh_names for speed in speeds for k in ks]
 
 
@@ -201,13 +224,19 @@ def run(args: argparse.Namespace) -> int:
         print("woody sweep: no usable meshes", file=sys.stderr)
         return 2
     csv_path = out / CSV_FILE
-    done = completed_runs(csv_path, args.lanes)
-    runs = plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side)
+    camera = _folder_camera(out / META_FILE)
+    if camera not in (None, args.top_camera):
+        print(f"woody sweep: {out} holds runs with --top-camera {camera}; use another --out for "
+              f"--top-camera {args.top_camera}", file=sys.stderr)
+        return 2
+    done = completed_runs(csv_path, args.lanes, out if args.traces else None)
+    runs = plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, top_camera=args.top_camera)
     todo = [r for r in runs if _key(r.mesh, r.k, r.speed_fpm, mass) not in done]
     print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds = {len(runs)} runs "
           f"({len(runs) - len(todo)} already in {csv_path}, {len(todo)} to go), {args.lanes} lanes, "
-          f"M = {mass:g} kg, {args.jobs} jobs", file=sys.stderr)
-    written, wall = run_grid(todo, args.meshes, min(args.jobs, max(1, len(todo))), csv_path)
+          f"M = {mass:g} kg, top camera {args.top_camera}, {args.jobs} jobs", file=sys.stderr)
+    written, wall = run_grid(todo, args.meshes, min(args.jobs, max(1, len(todo))), csv_path,
+                             trace_out=out if args.traces else None)
     meta = _update_meta(out / META_FILE, written, wall, args, len(names), mass)
     if written:
         print(f"woody sweep: {written} fillet evaluations in {wall:.1f} s = {written / wall * 60:.0f} /min",
@@ -217,7 +246,28 @@ def run(args: argparse.Namespace) -> int:
 
         md = results.build(out, meta, docs=Path(args.docs) if args.docs else None)
         print(f"woody sweep: wrote {md}", file=sys.stderr)
+    if args.traces:
+        _report_traces(out)
     return 0
+
+
+def _report_traces(out: Path) -> None:
+    from woody_common.calibration import load_calibration
+    from woody_tools import traces
+    from woody_vision.shape_score import W1, W2
+
+    rows = traces.join(out)
+    plots = traces.plot(out, rows, W1, W2, load_calibration().phi_threshold)
+    print(f"woody sweep: wrote {out / traces.TRACE_CSV} ({len(rows)} frames) and {len(plots)} trace plots in "
+          f"{out / traces.TRACE_DIR}", file=sys.stderr)
+
+
+def _folder_camera(meta_path: Path) -> str | None:
+    """The top camera of the runs already in a sweep folder (None if it has none)."""
+    if not meta_path.exists():
+        return None
+    cameras = {i.get("top_camera", "default") for i in json.loads(meta_path.read_text()).get("invocations", [])}
+    return cameras.pop() if len(cameras) == 1 else None
 
 
 def _update_meta(path: Path, written: int, wall: float, args: argparse.Namespace, n_meshes: int, mass: float) -> dict:
@@ -228,6 +278,7 @@ def _update_meta(path: Path, written: int, wall: float, args: argparse.Namespace
             if Path(sys.argv[0]).name == "woody" else "woody " + " ".join(shlex.quote(a) for a in _argv(args)),
             "evaluations": written, "wall_s": round(wall, 2), "jobs": args.jobs, "cores": os.cpu_count(),
             "meshes": args.meshes, "n_meshes": n_meshes, "mass": mass, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
+            "top_camera": args.top_camera,
         })
     meta["evaluations"] = sum(i["evaluations"] for i in meta["invocations"])
     meta["wall_s"] = sum(i["wall_s"] for i in meta["invocations"])
@@ -241,4 +292,8 @@ def _argv(args: argparse.Namespace) -> list[str]:
            "--jobs", str(args.jobs), "--out", str(args.out)]
     if args.mass is not None:
         out += ["--mass", f"{args.mass:g}"]
+    if args.top_camera != "default":
+        out += ["--top-camera", args.top_camera]
+    if args.traces:
+        out.append("--traces")
     return out

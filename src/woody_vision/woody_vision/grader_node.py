@@ -48,8 +48,8 @@ class Grader(Node):
         self.evaluator_options = dict(
             w1=declare(self, "w1", 100.0, "Weight of the Hu-moment term of Φ.", 0.0, 1e6),
             w2=declare(self, "w2", 100.0, "Weight of the solidity term of Φ.", 0.0, 1e6),
-            tip_ratio=declare(self, "tip_ratio", 0.30, "Tip cut where the width falls below this fraction of the "
-                              "maximum body width.", 0.01, 0.99),
+            tip_ratio=declare(self, "tip_ratio", 0.30, "The reference's narrow leading end is cut up to the first "
+                              "line at least this fraction of the maximum body width.", 0.01, 0.99),
         )
         lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
         side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)

@@ -22,7 +22,7 @@ from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 from woody_sim.ros_params import declare, run_node
 from woody_vision.camera_model import LaneLayout
 from woody_vision.frame_checks import FrameChecker, FrameError, image_to_array
-from woody_vision.segmentation import BackgroundModel, SegmentationParams, segment_depth
+from woody_vision.segmentation import DEFAULT_HEIGHT_THRESHOLD_M, BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.tracking import CentroidTracker
 
 
@@ -32,8 +32,8 @@ class Segmenter(Node):
     def __init__(self) -> None:
         super().__init__("segmenter")
         self.params = SegmentationParams(
-            height_threshold_m=declare(self, "height_threshold_m", 0.005, "Height above the belt background that "
-                                       "counts as fillet (m).", 0.0005, 0.1),
+            height_threshold_m=declare(self, "height_threshold_m", DEFAULT_HEIGHT_THRESHOLD_M, "Height above the "
+                                       "belt background that counts as fillet (m).", 0.0005, 0.1),
             min_area_px=declare(self, "min_area_px", 500, "Blobs smaller than this are dropped (px).", 1, 100000),
         )
         self.lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)

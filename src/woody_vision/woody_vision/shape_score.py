@@ -1,20 +1,34 @@
 """The paper's top-down shape score Φ, evaluated per tracked fillet as it bends over the roller edge.
 
 Per track, :class:`ShapeEvaluator` runs a small state machine on the fillet's
-contour, frame by frame (flow = +v, the roller edge is the image row ``edge_row``):
+contour, frame by frame (flow = +v, the roller edge is the image row ``edge_row``;
+the leading edge is the contour's max v, the trailing edge its min v):
 
-1. approaching: remember the latest contour whose leading edge (max v) is still
-   short of ``edge_row - reference_margin_px``;
-2. when the leading edge reaches the edge, that remembered contour becomes the
-   reference: its tip-cut body H_ref, min-area-rect aspect ratio AR (≥ 1),
-   solidity S_ref and the offset from the body's trailing edge (min v) to its
-   centroid, locked while the fillet is still flat;
-3. every frame from then on (this one included): cut the current contour the
-   same way and score Φ_t = w1·D(H_ref, H_cur)/AR + w2·|S_ref − S_cur|, with D
-   ``cv2.matchShapes`` I1; keep the maximum and its two unweighted terms;
-4. the window closes on the first frame where the virtual centroid (current
-   body trailing edge + locked offset) is at or past the edge; that frame is
-   scored too, since it is the observation nearest the crossing moment.
+1. approaching: remember the latest contour whose leading edge is still short of
+   ``edge_row - reference_margin_px``;
+2. when the leading edge reaches that row, the remembered (flat) contour becomes
+   the reference (:func:`make_reference`): its narrow leading end is cut off once
+   (:func:`leading_cut_rows`), and the body's length L along the flow, its
+   min-area-rect aspect ratio AR (≥ 1), its solidity S_ref and the offset from
+   the trailing edge to its centroid are locked;
+3. the window opens on the first frame whose rigid body front (trailing edge + L)
+   reaches the edge. Every frame in it, the current body is the current contour
+   clipped to the same span [trailing edge, trailing edge + L]
+   (:func:`clip_body`) and scored Φ_t = w1·D(H_ref, H_cur)/AR + w2·|S_ref − S_cur|,
+   D = ``cv2.matchShapes`` I1. The result keeps max Φ_t and, like the paper's
+   "Hu Mo. Score" and "Sol. Diff." columns, each term's own maximum;
+4. the window closes on the first frame where the virtual centroid (trailing
+   edge + locked offset) is at or past the edge; that frame is scored too.
+
+Why the cut is fixed by the reference and not re-found per frame (as the seed
+system does): the segmenter thresholds height above the empty scene, and past
+the edge the empty scene is the floor, so a thin tip that was too low to
+segment on the belt appears once it is over the edge. A per-frame width cut
+then jumps and adds that tip to the body, a change that is the same for every
+stiff fillet: it gave ``seed0002`` a Φ of about 12 at every k from 20 to 400.
+Clipping every frame at the locked rigid front leaves anything that only
+appears ahead of the body out of the score; only bending pulls the visible
+body back inside the span.
 
 A result is produced exactly once per evaluator: 'scored' when the window
 closes, otherwise 'unscored' with a reason (no reference because the track
@@ -37,55 +51,63 @@ W1 = 100.0
 W2 = 100.0
 """Weight of the solidity term (paper)."""
 TIP_WIDTH_RATIO = 0.30
-"""Ends narrower than this fraction of the widest row are cut off (paper: 30 %)."""
+"""The leading end is cut up to the first line at least this fraction of the widest line (paper: 30 %)."""
 DEFAULT_REFERENCE_MARGIN_PX = 2.0
 
 STATUS_SCORED = "scored"
 STATUS_UNSCORED = "unscored"
 REASON_STARTED_PAST_EDGE = "no reference: track started with its leading edge at or past the roller edge"
-REASON_LOST_BEFORE_EDGE = "track ended before reaching the roller edge"
+REASON_LOST_BEFORE_EDGE = "track ended before its body reached the roller edge"
 REASON_LOST_IN_WINDOW = "track ended before the evaluation window closed"
 REASON_DEGENERATE = "degenerate reference contour"
 
 
-def cut_tip(contour: np.ndarray, flow_axis: str = "v", tip_ratio: float = TIP_WIDTH_RATIO) -> np.ndarray:
-    """Body contour with both ends cut where the transverse width falls below ``tip_ratio`` × max width.
-
-    The contour is rasterised and its width (filled pixels per line across the
-    flow) is walked from the widest line towards each end; the body keeps the
-    lines up to, not including, the first one narrower than the limit. Returns a
-    (K, 2) int32 contour in the input's coordinates (the input itself if it
-    encloses no pixels).
-    """
-    if flow_axis not in ("u", "v"):
-        raise ValueError(f"flow_axis must be 'u' or 'v', got {flow_axis!r}")
+def fill_rows(contour: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The contour rasterised in its bounding box: (mask, first row v, first column u)."""
     points = np.asarray(contour, dtype=np.int32).reshape(-1, 2)
-    if flow_axis == "u":
-        points = points[:, ::-1]
-    origin = points.min(axis=0)
-    size = points.max(axis=0) - origin + 1
+    u0, v0 = (int(x) for x in points.min(axis=0))
+    size = points.max(axis=0) - (u0, v0) + 1
     mask = np.zeros((int(size[1]), int(size[0])), np.uint8)
-    cv2.fillPoly(mask, [points - origin], 255)
-    widths = np.count_nonzero(mask, axis=1)
-    peak = int(np.argmax(widths))
-    narrow = widths < tip_ratio * widths[peak]
-    before = np.flatnonzero(narrow[:peak])
-    after = np.flatnonzero(narrow[peak:])
-    first = int(before[-1]) + 1 if before.size else 0
-    last = peak + int(after[0]) if after.size else mask.shape[0]
+    cv2.fillPoly(mask, [points - (u0, v0)], 255)
+    return mask, v0, u0
+
+
+def leading_cut_rows(widths: np.ndarray, tip_ratio: float = TIP_WIDTH_RATIO) -> int:
+    """Rows to cut off the leading (last) end of a width profile.
+
+    Scanning from the leading end, the cut keeps the first row at least
+    ``tip_ratio`` × the widest row and everything behind it. A cut longer than
+    half the fillet is not a tip but an odd outline, and is ignored (0).
+    """
+    widths = np.asarray(widths)
+    if widths.size == 0 or widths.max() <= 0:
+        return 0
+    cut = int(np.argmax(widths[::-1] >= tip_ratio * widths.max()))
+    return cut if 2 * cut <= widths.size else 0
+
+
+def clip_body(contour: np.ndarray, trailing_row: int, length_px: int) -> np.ndarray:
+    """The contour's part between rows ``trailing_row`` and ``trailing_row + length_px`` (inclusive).
+
+    Returns the largest outer contour of that part as (K, 2) int32 in the input's
+    coordinates, or an empty (0, 2) array if nothing of the contour lies there.
+    """
+    mask, v0, u0 = fill_rows(contour)
+    first = max(0, int(trailing_row) - v0)
+    last = int(trailing_row) + int(length_px) - v0 + 1
     mask[:first] = 0
-    mask[last:] = 0
+    mask[max(last, 0):] = 0
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     if not contours:
-        return np.asarray(contour, dtype=np.int32).reshape(-1, 2)
-    body = max(contours, key=cv2.contourArea).reshape(-1, 2) + origin
-    if flow_axis == "u":
-        body = body[:, ::-1]
+        return np.zeros((0, 2), np.int32)
+    body = max(contours, key=cv2.contourArea).reshape(-1, 2) + (u0, v0)
     return np.ascontiguousarray(body, dtype=np.int32)
 
 
 def solidity(contour: np.ndarray) -> float:
     """Contour area over convex-hull area (1 for convex shapes, 0 for degenerate ones)."""
+    if len(contour) < 3:
+        return 0.0
     hull_area = cv2.contourArea(cv2.convexHull(contour))
     return cv2.contourArea(contour) / hull_area if hull_area > 0.0 else 0.0
 
@@ -105,13 +127,18 @@ class ShapeReference:
     aspect_ratio: float
     solidity: float
     centroid_offset_px: float
-    """Body centroid row minus body trailing-edge row (min v)."""
+    """Body centroid row minus trailing-edge row (min v)."""
+    length_px: int
+    """Body length along the flow: last body row minus trailing-edge row. Trailing edge + this = the rigid front."""
 
 
 def make_reference(contour: np.ndarray, tip_ratio: float = TIP_WIDTH_RATIO) -> ShapeReference | None:
-    """Reference measures of a flat fillet's contour, or None if its body has no area."""
-    body = cut_tip(contour, "v", tip_ratio)
-    moments = cv2.moments(body)
+    """Reference measures of a flat fillet's contour with its narrow leading end cut, or None if degenerate."""
+    points = np.asarray(contour, dtype=np.int32).reshape(-1, 2)
+    mask, trailing, _ = fill_rows(points)
+    length = mask.shape[0] - 1 - leading_cut_rows(np.count_nonzero(mask, axis=1), tip_ratio)
+    body = clip_body(points, trailing, length)
+    moments = cv2.moments(body) if len(body) >= 3 else {"m00": 0.0}
     if moments["m00"] <= 0.0:
         return None
     ratio = aspect_ratio(body)
@@ -121,7 +148,8 @@ def make_reference(contour: np.ndarray, tip_ratio: float = TIP_WIDTH_RATIO) -> S
         body=body,
         aspect_ratio=ratio,
         solidity=solidity(body),
-        centroid_offset_px=moments["m01"] / moments["m00"] - float(body[:, 1].min()),
+        centroid_offset_px=moments["m01"] / moments["m00"] - trailing,
+        length_px=length,
     )
 
 
@@ -129,6 +157,16 @@ def shape_terms(reference: ShapeReference, body: np.ndarray) -> tuple[float, flo
     """Unweighted (D/AR, |S_ref − S_cur|) of a current body against the reference."""
     distance = cv2.matchShapes(reference.body, body, cv2.CONTOURS_MATCH_I1, 0.0)
     return distance / reference.aspect_ratio, abs(reference.solidity - solidity(body))
+
+
+@dataclass(frozen=True)
+class FrameScore:
+    """One scored frame of a window (for traces): Φ_t and its two unweighted terms."""
+
+    stamp: float
+    phi: float
+    hu_term: float
+    solidity_term: float
 
 
 @dataclass(frozen=True)
@@ -140,11 +178,12 @@ class ShapeResult:
     reason: str
     """Why it is unscored ('' when scored)."""
     phi: float
-    """Max Φ over the window (NaN if no frame was scored)."""
+    """Max Φ_t over the window (NaN if no frame was scored)."""
     hu_term: float
-    """D/AR at the max-Φ frame (unweighted: Φ = w1·hu_term + w2·solidity_term)."""
+    """Max over the window of D/AR, its own maximum (paper's "Hu Mo. Score"; not necessarily at the max-Φ frame,
+    so Φ ≤ w1·hu_term + w2·solidity_term)."""
     solidity_term: float
-    """|S_ref − S_cur| at the max-Φ frame (unweighted)."""
+    """Max over the window of |S_ref − S_cur|, its own maximum (paper's "Sol. Diff.")."""
     frames: int
     """Frames scored in the window."""
     stamp: float | None
@@ -155,11 +194,13 @@ class ShapeResult:
     lane: int = -1
     reference_stamp: float | None = None
     """Stamp of the reference frame (the last flat frame before the leading edge reached the roller edge)."""
+    trace: tuple[FrameScore, ...] = ()
+    """Every scored frame of the window, in order."""
 
 
 class _Phase(Enum):
     APPROACHING = "approaching"
-    IN_WINDOW = "in_window"
+    REFERENCED = "referenced"
     DONE = "done"
 
 
@@ -187,8 +228,7 @@ class ShapeEvaluator:
         self._last_flat: np.ndarray | None = None
         self._last_flat_stamp: float | None = None
         self._reference: ShapeReference | None = None
-        self._best = (math.nan, math.nan, math.nan)
-        self._frames = 0
+        self._trace: list[FrameScore] = []
         self._last_stamp: float | None = None
 
     @property
@@ -212,16 +252,13 @@ class ShapeEvaluator:
             self._last_flat = None
             if self._reference is None:
                 return self._finish(STATUS_UNSCORED, REASON_DEGENERATE)
-            self._phase = _Phase.IN_WINDOW
+            self._phase = _Phase.REFERENCED
         reference = self._reference
-        body = cut_tip(points, "v", self.tip_ratio)
-        hu_term, solidity_term = shape_terms(reference, body)
-        phi = self.w1 * hu_term + self.w2 * solidity_term
-        self._frames += 1
-        if not phi <= self._best[0]:  # also true while the best is still NaN
-            self._best = (phi, hu_term, solidity_term)
-        virtual_centroid = float(body[:, 1].min()) + reference.centroid_offset_px
-        if virtual_centroid >= self.edge_row:
+        trailing = int(points[:, 1].min())
+        if trailing + reference.length_px < self.edge_row:
+            return None  # the rigid body front has not reached the edge yet: the window is not open
+        self._score(clip_body(points, trailing, reference.length_px), stamp)
+        if trailing + reference.centroid_offset_px >= self.edge_row:
             return self._finish(STATUS_SCORED, "")
         return None
 
@@ -229,23 +266,36 @@ class ShapeEvaluator:
         """The track ended: the unscored result, or None if a result was already produced."""
         if self._phase is _Phase.DONE:
             return None
-        reason = REASON_LOST_BEFORE_EDGE if self._phase is _Phase.APPROACHING else REASON_LOST_IN_WINDOW
+        reason = REASON_LOST_IN_WINDOW if self._trace else REASON_LOST_BEFORE_EDGE
         return self._finish(STATUS_UNSCORED, reason)
+
+    def _score(self, body: np.ndarray, stamp: float) -> None:
+        if len(body) >= 3 and cv2.contourArea(body) > 0.0:
+            hu_term, solidity_term = shape_terms(self._reference, body)
+        else:  # a degenerate contour (no area) has no shape to compare: the frame counts, its terms are NaN
+            hu_term, solidity_term = math.nan, math.nan
+        phi = self.w1 * hu_term + self.w2 * solidity_term
+        self._trace.append(FrameScore(stamp, phi, hu_term, solidity_term))
 
     def _finish(self, status: str, reason: str) -> ShapeResult:
         self._phase = _Phase.DONE
-        phi, hu_term, solidity_term = self._best
         return ShapeResult(
             status=status,
             reason=reason,
-            phi=phi,
-            hu_term=hu_term,
-            solidity_term=solidity_term,
-            frames=self._frames,
+            phi=_nanmax([f.phi for f in self._trace]),
+            hu_term=_nanmax([f.hu_term for f in self._trace]),
+            solidity_term=_nanmax([f.solidity_term for f in self._trace]),
+            frames=len(self._trace),
             stamp=self._last_stamp,
             aspect_ratio=self._reference.aspect_ratio if self._reference is not None else math.nan,
             reference_stamp=self._last_flat_stamp if self._reference is not None else None,
+            trace=tuple(self._trace),
         )
+
+
+def _nanmax(values: list[float]) -> float:
+    finite = [v for v in values if math.isfinite(v)]
+    return max(finite) if finite else math.nan
 
 
 class ShapeScorer:

@@ -1,0 +1,322 @@
+"""Φ on synthetic contours with known geometry: leading-end cut, reference, fixed body span, window, terms.
+
+Flow is +v and the roller edge is the row EDGE; a contour's leading edge is its
+max v, its trailing edge its min v. Shapes are drawn as polygons so their width
+profile (and so the expected cut) is known exactly.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from woody_vision.camera_model import LaneLayout
+from woody_vision.segmentation import Blob, segment_depth
+from woody_vision.shape_score import (
+    REASON_LOST_BEFORE_EDGE,
+    REASON_LOST_IN_WINDOW,
+    REASON_STARTED_PAST_EDGE,
+    STATUS_SCORED,
+    STATUS_UNSCORED,
+    ShapeEvaluator,
+    ShapeScorer,
+    aspect_ratio,
+    clip_body,
+    fill_rows,
+    leading_cut_rows,
+    make_reference,
+    shape_terms,
+    solidity,
+)
+from woody_vision.synthetic import DEFAULT_CAMERA_HEIGHT_M, DEFAULT_TOP_K, TopFillet, TopScene, teardrop_polygon
+from woody_vision.tracking import CentroidTracker
+
+EDGE = 200.0
+FPS = 30.0
+LAYOUT3 = LaneLayout(DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 3, 0.16)
+
+
+def polygon_contour(points) -> np.ndarray:
+    return np.round(np.asarray(points, float)).astype(np.int32)
+
+
+def kite(lead_v: float = 300.0) -> np.ndarray:
+    """Narrow tip leading at ``lead_v``, widening over 100 rows to 100 px; 100 rows at full width; a 50-row tail."""
+    return polygon_contour([(200, lead_v), (250, lead_v - 100), (250, lead_v - 200), (200, lead_v - 250),
+                            (150, lead_v - 200), (150, lead_v - 100)])
+
+
+def rows_of(contour: np.ndarray) -> tuple[int, int]:
+    return int(contour[:, 1].min()), int(contour[:, 1].max())
+
+
+def translating(frames: int, start_lead_v: float = 120.0, step: float = 3.0, length: float = 110.0,
+                width: float = 60.0, bend=None) -> list[np.ndarray]:
+    """Contours of a flat teardrop (tip leading) moving down ``step`` px a frame; ``bend(points)`` deforms each."""
+    out = []
+    for i in range(frames):
+        points = teardrop_polygon((300.0, start_lead_v + i * step - length / 2), length, width)
+        out.append(polygon_contour(bend(points) if bend else points))
+    return out
+
+
+def foreshorten(factor: float, narrow: float = 0.0):
+    """Simulated bending: the part beyond the edge is shortened towards it (and optionally narrowed)."""
+    def bend(points: np.ndarray) -> np.ndarray:
+        p = points.copy()
+        over = p[:, 1] > EDGE
+        p[over, 1] = EDGE + (p[over, 1] - EDGE) * factor
+        p[over, 0] = 300.0 + (p[over, 0] - 300.0) * (1.0 - narrow)
+        return p
+    return bend
+
+
+def blunt_tip_past_the_edge(points: np.ndarray) -> np.ndarray:
+    """What the top camera shows of a stiff fillet's thin tip once it is over the floor: the tip ahead of the body
+    widens to a blunt 40-px end over its first 6 rows, ahead of the 30 % cut (on the belt it was too thin to
+    segment); nothing else changes."""
+    p = points.copy()
+    lead = p[:, 1].max()
+    if lead <= EDGE:
+        return p
+    tip = p[:, 1] > lead - 6.0
+    p[tip, 0] = 300.0 + np.sign(p[tip, 0] - 300.0) * np.maximum(np.abs(p[tip, 0] - 300.0), 20.0)
+    return p
+
+
+def run_evaluator(contours, edge: float = EDGE):
+    evaluator = ShapeEvaluator(edge)
+    for i, contour in enumerate(contours):
+        result = evaluator.update(contour, i / FPS)
+        if result is not None:
+            return i, result, evaluator
+    return None, None, evaluator
+
+
+# ------------------------------------------------------------------ cut, clip, reference
+
+
+def test_leading_cut_scans_from_the_leading_end_to_the_first_row_at_30_percent():
+    mask, v0, _ = fill_rows(kite(300.0))
+    widths = np.count_nonzero(mask, axis=1)
+    assert v0 == 50 and widths.size == 251
+    # width(v) = 300 - v near the tip: the first row with ≥ 30 px, scanning from v = 300, is v = 270
+    assert leading_cut_rows(widths) == pytest.approx(30, abs=1)
+    assert leading_cut_rows(widths, tip_ratio=0.5) == pytest.approx(50, abs=1)
+    # the trailing tail is narrow too, but only the leading end is ever cut
+    assert leading_cut_rows(widths[::-1]) == pytest.approx(15, abs=1)
+
+
+def test_a_leading_cut_longer_than_half_the_fillet_is_ignored():
+    # a wide 40-row trailing lobe ahead of which a 100-row band of 20 px leads: not a tip, an odd outline
+    lollipop = polygon_contour([(150, 0), (250, 0), (250, 40), (210, 40), (210, 140), (190, 140), (190, 40),
+                                (150, 40)])
+    mask, _, _ = fill_rows(lollipop)
+    assert leading_cut_rows(np.count_nonzero(mask, axis=1)) == 0
+    assert leading_cut_rows(np.zeros(5)) == 0
+    reference = make_reference(lollipop)
+    assert reference.length_px == 140
+
+
+def test_clip_body_keeps_exactly_the_span_from_the_trailing_edge():
+    contour = kite(300.0)
+    body = clip_body(contour, 50, 100)
+    assert rows_of(body) == (50, 150)
+    assert (body[:, 0].min(), body[:, 0].max()) == (150, 250)
+    assert rows_of(clip_body(contour, 50, 1000)) == (50, 300)
+    assert clip_body(contour, 400, 10).shape == (0, 2)
+
+
+def test_reference_cuts_the_leading_tip_once_and_locks_length_offset_ar_solidity():
+    reference = make_reference(kite(300.0))
+    assert rows_of(reference.body) == (50, pytest.approx(270, abs=1))
+    assert reference.length_px == pytest.approx(220, abs=1)
+    centroid_v = cv2.moments(reference.body)["m01"] / cv2.moments(reference.body)["m00"]
+    assert reference.centroid_offset_px == pytest.approx(centroid_v - 50.0)
+    assert reference.aspect_ratio == pytest.approx(aspect_ratio(reference.body))
+    assert reference.solidity == pytest.approx(solidity(reference.body))
+    assert make_reference(polygon_contour([(0, 0), (10, 0), (20, 0)])) is None
+
+
+def test_solidity_and_aspect_ratio_of_known_shapes():
+    rect = polygon_contour([(0, 0), (100, 0), (100, 50), (0, 50)])
+    assert solidity(rect) == pytest.approx(1.0)
+    assert aspect_ratio(rect) == pytest.approx(2.0)
+    ell = polygon_contour([(0, 0), (100, 0), (100, 50), (50, 50), (50, 100), (0, 100)])
+    assert solidity(ell) == pytest.approx(7500 / 8750)
+    assert solidity(polygon_contour([(0, 0), (10, 0), (20, 0)])) == 0.0
+    assert math.isinf(aspect_ratio(polygon_contour([(0, 0), (10, 0), (20, 0)])))
+
+
+# ------------------------------------------------------------------ Φ
+
+
+def test_phi_of_an_unchanged_contour_is_zero():
+    index, result, evaluator = run_evaluator(translating(80))
+    assert result is not None and result.status == STATUS_SCORED and result.reason == ""
+    assert result.frames >= 5 and len(result.trace) == result.frames
+    assert result.phi < 1e-6 and result.hu_term < 1e-8 and result.solidity_term < 1e-8
+    assert evaluator.done and evaluator.update(translating(1)[0], 99.0) is None and evaluator.finish() is None
+
+
+def test_phi_grows_monotonically_with_bending():
+    flat = teardrop_polygon((300.0, 180.0), 110.0, 60.0)  # body front 20+ px beyond the edge at 200
+    reference = make_reference(polygon_contour(flat))
+    trailing = int(polygon_contour(flat)[:, 1].min())
+    phis = []
+    for degrees in (0, 5, 10, 20, 30, 45, 60, 75):
+        theta = math.radians(degrees)
+        bent = polygon_contour(foreshorten(math.cos(theta), narrow=0.5 * (1.0 - math.cos(theta)))(flat))
+        hu, sol = shape_terms(reference, clip_body(bent, trailing, reference.length_px))
+        phis.append(100.0 * hu + 100.0 * sol)
+    assert phis[0] < 1e-6
+    assert all(b > a for a, b in zip(phis, phis[1:])), phis
+    assert phis[-1] > 10.0
+
+
+def test_a_tip_that_only_appears_past_the_edge_does_not_score():
+    """The cause of the old k-independent floor: the cut is fixed by the reference, so outline that appears ahead
+    of the rigid body front (a thin tip segmented only against the floor) is not part of the body."""
+    _, plain, _ = run_evaluator(translating(80))
+    _, blunt, _ = run_evaluator(translating(80, bend=blunt_tip_past_the_edge))
+    assert blunt.status == STATUS_SCORED and blunt.frames == plain.frames
+    assert blunt.phi == pytest.approx(plain.phi, abs=1e-9)
+    # the same change re-cut per frame at 30 % of the width would add the tip to the body: a large Φ
+    frame = translating(80, bend=blunt_tip_past_the_edge)[40]
+    reference = make_reference(translating(80)[0])
+    mask, trailing, _ = fill_rows(frame)
+    recut = clip_body(frame, trailing, mask.shape[0] - 1 - leading_cut_rows(np.count_nonzero(mask, axis=1)))
+    assert 100.0 * sum(shape_terms(reference, recut)) > 5.0
+
+
+def test_flexible_fillet_scores_clearly_higher_than_a_rigid_one():
+    def phi(curvature: float, across: float) -> float:
+        scene = TopScene([TopFillet(lead_m=-0.25, across_m=across, curvature_per_m=curvature)])
+        background = scene.background_depth()
+        evaluator = ShapeEvaluator(scene.edge_row)
+        for i in range(60):
+            blobs = segment_depth(scene.render(i / FPS)[1], background)
+            if blobs:
+                result = evaluator.update(blobs[0].contour, i / FPS)
+                if result is not None:
+                    assert result.status == STATUS_SCORED and result.frames >= 3
+                    return result.phi
+        raise AssertionError("window never closed")
+
+    for across in (0.0, 0.16):
+        rigid, flexible = phi(0.5, across), phi(14.0, across)
+        assert flexible > 2.5 * rigid and flexible - rigid > 5.0, (across, rigid, flexible)
+
+
+def test_terms_are_their_own_maxima_over_the_window():
+    def notch_then_shorten(i: int):
+        def bend(points: np.ndarray) -> np.ndarray:
+            lead = points[:, 1].max()
+            if lead - 110.0 + 60.0 < EDGE:  # body front not at the edge yet
+                return points
+            if i % 2:  # a narrow notch in one side of the flat part: mostly a solidity change
+                p = points.copy()
+                near = (np.abs(p[:, 1] - (lead - 75.0)) < 3.0) & (p[:, 0] > 300.0)
+                p[near, 0] = 300.0 + (p[near, 0] - 300.0) * 0.3
+                return p
+            return foreshorten(0.3)(points)  # bending: mostly a Hu change
+        return bend
+
+    contours = [translating(80, bend=notch_then_shorten(i))[i] for i in range(80)]
+    _, result, _ = run_evaluator(contours)
+    phis = [f.phi for f in result.trace]
+    hus = [f.hu_term for f in result.trace]
+    sols = [f.solidity_term for f in result.trace]
+    assert result.phi == max(phis) and result.hu_term == max(hus) and result.solidity_term == max(sols)
+    assert int(np.argmax(hus)) != int(np.argmax(sols))
+    assert result.phi < 100.0 * result.hu_term + 100.0 * result.solidity_term
+
+
+# ------------------------------------------------------------------ window
+
+
+def test_window_opens_at_the_rigid_front_and_closes_at_the_virtual_centroid():
+    flat = translating(80)
+    reference_index = max(i for i, c in enumerate(flat) if c[:, 1].max() < EDGE - 2.0)
+    reference = make_reference(flat[reference_index])
+    trailing = [int(c[:, 1].min()) for c in flat]
+    opens = next(i for i, t in enumerate(trailing) if t + reference.length_px >= EDGE)
+    closes = next(i for i, t in enumerate(trailing) if t + reference.centroid_offset_px >= EDGE)
+    assert opens > reference_index + 2 and closes > opens + 2
+    index, result, _ = run_evaluator(flat)
+    assert index == closes and result.stamp == pytest.approx(closes / FPS)
+    assert result.frames == closes - opens + 1
+    assert [f.stamp for f in result.trace] == pytest.approx([i / FPS for i in range(opens, closes + 1)])
+    assert result.reference_stamp == pytest.approx(reference_index / FPS)
+
+    # Bent over the edge, the body's real centroid lags, but the window still closes on the same frame:
+    # the virtual centroid follows the flat trailing edge plus the offset locked while flat.
+    bent = translating(80, bend=foreshorten(0.4))
+    index_bent, result_bent, _ = run_evaluator(bent)
+    assert index_bent == closes and result_bent.status == STATUS_SCORED and result_bent.phi > 1.0
+
+
+def test_a_degenerate_frame_in_the_window_is_counted_but_not_scored():
+    contours = translating(80)
+    _, plain, _ = run_evaluator(contours)
+    opens = round(plain.trace[0].stamp * FPS)
+    line = polygon_contour([(300, opens * 3 + 20), (300, opens * 3 + 60), (300, opens * 3 + 90)])
+    _, result, _ = run_evaluator(contours[:opens + 1] + [line] + contours[opens + 2:])
+    assert result.frames == plain.frames and math.isnan(result.trace[1].phi)
+    assert result.phi == pytest.approx(plain.phi, abs=1e-9)
+
+
+def test_unscored_when_the_track_starts_past_the_edge():
+    evaluator = ShapeEvaluator(EDGE)
+    result = evaluator.update(translating(1, start_lead_v=EDGE + 5.0)[0], 0.0)
+    assert result.status == STATUS_UNSCORED and result.reason == REASON_STARTED_PAST_EDGE
+    assert math.isnan(result.phi) and math.isnan(result.aspect_ratio) and result.reference_stamp is None
+    assert evaluator.finish() is None
+
+
+def test_unscored_when_the_track_is_lost_in_the_window_or_before_the_body_reaches_the_edge():
+    contours = translating(80)
+    _, plain, _ = run_evaluator(contours)
+    opens = round(plain.trace[0].stamp * FPS)
+    evaluator = ShapeEvaluator(EDGE)
+    for i in range(opens + 2):
+        assert evaluator.update(contours[i], i / FPS) is None
+    result = evaluator.finish()
+    assert result.status == STATUS_UNSCORED and result.reason == REASON_LOST_IN_WINDOW
+    assert result.frames == 2 and result.stamp == pytest.approx((opens + 1) / FPS)
+    assert evaluator.finish() is None
+
+    referenced = ShapeEvaluator(EDGE)  # reference locked, body front not at the edge yet
+    for i in range(opens):
+        referenced.update(contours[i], i / FPS)
+    assert referenced.finish().reason == REASON_LOST_BEFORE_EDGE
+    early = ShapeEvaluator(EDGE)
+    early.update(contours[0], 0.0)
+    assert early.finish().reason == REASON_LOST_BEFORE_EDGE
+
+
+def test_shape_scorer_reports_each_track_once_with_its_id_and_lane():
+    scorer = ShapeScorer(EDGE)
+    contours = translating(80)
+    tracker = CentroidTracker(lane_layout=LAYOUT3, max_distance_px=40.0, max_unseen=3)
+    results = []
+    for i, contour in enumerate(contours[:60]):
+        m = cv2.moments(contour)
+        blob = Blob(contour, (m["m10"] / m["m00"], m["m01"] / m["m00"]), int(m["m00"]), cv2.boundingRect(contour), 0.02)
+        results += scorer.update(tracker.update([blob]), i / FPS)
+    for i in range(60, 64):
+        results += scorer.update(tracker.update([]), i / FPS)
+    assert len(results) == 1 and results[0].status == STATUS_SCORED
+    assert results[0].track_id == 0 and results[0].lane == LAYOUT3.lane_of_u(300.0)
+
+
+def test_evaluator_options_are_validated():
+    with pytest.raises(ValueError):
+        ShapeEvaluator(EDGE, tip_ratio=1.0)
+    with pytest.raises(ValueError):
+        ShapeEvaluator(EDGE, reference_margin_px=-1.0)
+    with pytest.raises(ValueError):
+        ShapeScorer(EDGE, tip_ratio=0.0)
