@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 
+from woody_common.calibration import load_calibration
 from woody_tools import calibrate
 
 PHI = {"seed0000": (20.0, 4.0), "seed0001": (18.0, 5.0), "seed0002": (16.0, 12.5)}
@@ -24,10 +25,11 @@ def fake_evaluate(runs, spec, jobs, desc):
 def test_loo_plans_reference_meshes_only_and_reports_each_fold(tmp_path, monkeypatch, capsys):
     planned = []
     monkeypatch.setattr(calibrate, "_evaluate", lambda runs, *a: planned.extend(runs) or fake_evaluate(runs, *a))
-    assert calibrate.run_loo("builtin", 20.0, 1, tmp_path) == 0
+    assert calibrate.run_loo("builtin", 1, tmp_path) == 0
     assert {r.mesh for r in planned} == set(PHI)  # the generated meshes of 'builtin' are not reference meshes
     assert {(r.k, r.speed_fpm) for r in planned} == {(0.0, 100.0), (100.0, 100.0), (0.0, 130.0), (100.0, 130.0)}
-    assert all(not r.side and r.lanes == 3 and r.mass == 20.0 for r in planned)
+    mass = load_calibration().total_mass_kg
+    assert all(not r.side and r.lanes == 3 and r.mass == mass for r in planned)
     report = json.loads((tmp_path / "loo.json").read_text())
     folds = {f["held_out"]: f for f in report["speeds"]["100"]["folds"]}
     assert set(folds) == set(PHI)

@@ -18,6 +18,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from woody_common.calibration import load_calibration
 from woody_vision.grading import GradingRules
 from woody_vision.shape_score import STATUS_SCORED, ShapeEvaluator, ShapeResult
 from woody_vision.side_view import SideMeasurement
@@ -68,7 +69,8 @@ class FilletGrader:
     """Per-track shape evaluation, classification and side-view pairing."""
 
     edge_row: float
-    rules: GradingRules = field(default_factory=GradingRules)
+    rules: GradingRules = field(default_factory=lambda: GradingRules(load_calibration().phi_threshold))
+    """Default: the calibrated threshold (config/calibration.yaml)."""
     watched_lane: int | None = None
     side_wait_s: float = DEFAULT_SIDE_WAIT_S
     evaluator_options: dict = field(default_factory=dict)
