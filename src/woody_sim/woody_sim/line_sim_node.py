@@ -22,7 +22,7 @@ from woody_msgs.msg import FilletSpawn
 from woody_msgs.srv import SpawnFillet
 
 from woody_sim.fillet_model import DEFAULT_TOTAL_MASS, MIN_STABLE_MASS
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps
+from woody_sim.line_geometry import SPEED_RANGE_FPM, LineGeometry, fpm_to_mps
 from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.rendering import RenderProcess, camera_info_fields
@@ -42,7 +42,7 @@ class LineSim(Node):
         super().__init__("line_sim")
         lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
         speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
-                            "commercial line speeds).", 1.0, 400.0)
+                            "commercial line speeds).", *SPEED_RANGE_FPM)
         self.k_values = [float(k) for k in declare(self, "k_values", [0.0, 100.0],
                                                    "Stiffness values (N*m/rad) drawn per spawned fillet.")]
         mesh_spec = declare(self, "meshes", "builtin", "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
@@ -65,8 +65,8 @@ class LineSim(Node):
                                 0.0, 1e6)
         self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
                                         "subscribers listen to the top depth image.", 0, 100)
-        if not self.k_values or any(k < 0 for k in self.k_values):
-            raise ValueError(f"k_values must be a non-empty list of values >= 0, got {self.k_values}")
+        if not self.k_values or not all(0 <= k < float("inf") for k in self.k_values):
+            raise ValueError(f"k_values must be a non-empty list of finite values >= 0, got {self.k_values}")
         if side_lane >= lanes:
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
 

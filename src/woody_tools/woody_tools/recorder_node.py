@@ -38,7 +38,9 @@ keep-last ``queue_depth``. The offered profiles are stored in the channel's
 Per message, the subscription callback only queues the serialized bytes; a
 writer thread builds, compresses (zstd releases the GIL) and writes chunks, so
 compression and disk I/O use the second core. SIGINT/SIGTERM finish the file
-(summary and indexes) and log one line of counts per topic; exit code 0. A bad
+(summary and indexes) and log one line: messages, MB on disk (compressed), and per
+topic written/published (``/?`` when several publishers share it), naming what was
+lost in transport; exit code 0. A bad
 parameter or an unwritable output: one error line, exit code 2.
 """
 
@@ -103,6 +105,7 @@ class Recorder(Node):
             "use_sim_time": bool(p("use_sim_time").value), "start_unix_ns": time.time_ns(),
             "log_time": "system (wall) clock at reception, ns since the Unix epoch",
             "publish_time": "publisher's source timestamp (wall clock)",
+            "run_settings": p("run_settings").value,
         }
         try:
             self._writer = BagWriter(output, chunk_size=int(p("chunk_size").value),
@@ -119,6 +122,7 @@ class Recorder(Node):
         self._error: BaseException | None = None
         self._subscriptions_by_topic: dict[str, object] = {}
         self._offered: dict[str, int] = {}
+        self._seen: dict[str, list] = {}  # topic -> [first publication seq, last, received, most publishers]
         self._ignored: set[str] = set()
         self._start = time.monotonic()
         self._thread = threading.Thread(target=self._write_loop, name="mcap-writer", daemon=True)
@@ -151,6 +155,9 @@ class Recorder(Node):
         self.declare_parameter("flush_period", 1.0, desc("max seconds a message waits before its chunk is "
                                                          "written (what a SIGKILL can lose)", D))
         self.declare_parameter("max_buffer_mb", 512, desc("received but unwritten data held in memory", I))
+        self.declare_parameter("run_settings", "", desc("JSON object of the recorded run's settings, kept in the "
+                                                        "bag's woody metadata record (woody report rebuilds its "
+                                                        "settings table from it)", S))
 
     def _compile(self, name: str, pattern: str) -> re.Pattern | None:
         if not pattern:
@@ -208,8 +215,14 @@ class Recorder(Node):
         qos = self._qos(publishers)
         self._enqueue((topic, None, type_name, qos_profiles_yaml(p.qos_profile for p in publishers)), 0)
         enqueue, time_ns = self._enqueue, time.time_ns
+        seen = self._seen[topic] = [None, 0, 0, len(publishers)]
 
         def on_message(data: bytes, info: dict) -> None:
+            sequence = info.get("publication_sequence_number")
+            if sequence:
+                seen[0] = sequence if seen[0] is None else min(seen[0], sequence)
+                seen[1] = max(seen[1], sequence)
+            seen[2] += 1
             enqueue((topic, data, info["received_timestamp"] or time_ns(), info["source_timestamp"]), len(data))
 
         self._subscriptions_by_topic[topic] = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
@@ -223,6 +236,7 @@ class Recorder(Node):
             self._offered[topic] = count
             return
         self._offered[topic] = count
+        self._seen[topic][3] = max(self._seen[topic][3], count)
         sub_qos = self._subscriptions_by_topic[topic].qos_profile
         for pub in self.get_publishers_info_by_topic(topic):
             offered = pub.qos_profile
@@ -274,8 +288,19 @@ class Recorder(Node):
             with self._cond:
                 self._cond.notify_all()
 
+    def drops(self) -> dict[str, tuple[int, int | None]]:
+        """Per topic (written, published while subscribed): the publisher's sequence numbers count what it
+        sent, so a gap is a message lost in transport. ``None`` when several publishers share the topic
+        (their sequence numbers interleave) or the middleware gives none."""
+        result = {}
+        for topic, (first, last, _received, publishers) in sorted(self._seen.items()):
+            published = None if first is None or publishers > 1 else last - first + 1
+            result[topic] = (self._writer.counts.get(topic, 0), published)
+        return result
+
+
     def close(self) -> int:
-        """Drain the queue, finish the file, log the counts; 0 if the bag is complete, else 1."""
+        """Drain the queue, finish the file, log one summary line; 0 if the bag is complete, else 1."""
         with self._cond:
             self._stopping = True
             self._cond.notify_all()
@@ -285,22 +310,32 @@ class Recorder(Node):
             self.get_logger().error(f"writing {self.output} failed: {self._error}")
             code = 1
         duration = time.monotonic() - self._start
-        counts = self._writer.counts
+        counts, drops = self._writer.counts, self.drops()
         total = sum(counts.values())
         try:
             self._writer.add_metadata("woody.recorder", {
                 "duration_s": f"{duration:.3f}", "messages": str(total),
-                "counts": ",".join(f"{t}={n}" for t, n in sorted(counts.items()))})
+                "counts": ",".join(f"{t}={n}" for t, n in sorted(counts.items())),
+                "written/published": ",".join(f"{t}={_drop_text(*d)}" for t, d in drops.items())})
             self._writer.close()
+            size = self.output.stat().st_size
         except Exception as exc:  # noqa: BLE001
             self.get_logger().error(f"finishing {self.output} failed: {exc}")
             return 1
         missing = sorted(self._topics - set(counts))
-        per_topic = ", ".join(f"{t} {n}" for t, n in sorted(counts.items())) or "nothing"
+        lost = sum(max(0, p - w) for w, p in drops.values() if p is not None)
         self.get_logger().info(
-            f"wrote {self.output}: {total} messages, {self._writer.bytes_written / 1e6:.1f} MB in {duration:.1f} s "
-            f"({per_topic})" + (f"; never seen: {', '.join(missing)}" if missing else ""))
+            f"wrote {self.output}: {total} messages, {size / 1e6:.1f} MB on disk in {duration:.1f} s, "
+            f"{lost} lost in transport; written/published per topic: "
+            + (", ".join(f"{t} {_drop_text(*d)}" for t, d in drops.items()) or "nothing")
+            + (f"; never seen: {', '.join(missing)}" if missing else ""))
         return code
+
+
+def _drop_text(written: int, published: int | None) -> str:
+    if published is None:
+        return f"{written}/?"
+    return f"{written}/{published}" + (f" (lost {published - written})" if published > written else "")
 
 
 def main(args: list[str] | None = None) -> int:
