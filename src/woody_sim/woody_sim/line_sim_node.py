@@ -100,7 +100,7 @@ class LineSim(Node):
         self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
         self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
         self.create_service(SpawnFillet, "/spawn_fillet", self.on_spawn_request)
-        self.get_logger().info(
+        self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
             f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
             f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
             f"side {side_rate:g} Hz on lane {self.geometry.watched_lane}")
@@ -177,6 +177,7 @@ class LineSim(Node):
         """Run the line until shutdown or ``duration_s``; the executor serves the spawn service in between."""
         executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
         executor.add_node(self)
+        self.get_logger().info(self.summary)
         self._wait_for_subscribers(executor)
         next_top, next_side, next_clock = 0.0, 0.0, 0.0
         pending_stamp = None

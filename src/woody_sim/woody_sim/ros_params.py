@@ -9,6 +9,7 @@ traceback, and shuts the node down cleanly on Ctrl-C / SIGTERM.
 
 from __future__ import annotations
 
+import re
 import sys
 from typing import Callable
 
@@ -17,7 +18,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 def declare(node, name: str, default, description: str, low: float | None = None, high: float | None = None):
     """Declare a parameter with a descriptor (and an inclusive range for numbers); return its value."""
-    descriptor = ParameterDescriptor(description=description)
+    descriptor = ParameterDescriptor(description=description, read_only=True)  # every node reads them at start-up
     if low is not None and high is not None:
         if isinstance(default, bool):
             raise TypeError(f"parameter {name}: a bool has no range")
@@ -25,23 +26,80 @@ def declare(node, name: str, default, description: str, low: float | None = None
             descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
         else:
             descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high))]
-    return node.declare_parameter(name, default, descriptor).value
+    return _typed(name, default, node.declare_parameter(name, default, descriptor).value)
+
+
+def _typed(name: str, default, value):
+    """An override rclpy could not type (``-p name:=[]``) comes back as None: refuse it with the expected form."""
+    if value is None and default is not None:
+        raise ValueError(f"parameter {name}: needs a value like {list(default) if isinstance(default, (list, tuple)) else default!r}, "
+                         "got an empty or untyped one")
+    return value
+
+
+def check_overrides(node) -> None:
+    """`ValueError` naming every ``-p name:=value`` the node did not declare (a typo is otherwise silently ignored)."""
+    known = set(node._parameters)  # noqa: SLF001 - rclpy keeps declared names and overrides only privately
+    unknown = sorted(set(node._parameter_overrides) - known)  # noqa: SLF001
+    if unknown:
+        raise ValueError(f"unknown parameter{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
+                         f"{node.get_name()} knows: {', '.join(sorted(known))}")
+
+
+def usage(name: str, node=None) -> str:
+    """The usage text of a node; with the node built, its parameters with description and range."""
+    lines = [f"usage: {name} [--ros-args -p name:=value ... | --params-file FILE]"]
+    if node is None:
+        return lines[0] + f"\n{name} takes no other arguments; `{name} --help` lists its parameters"
+    for param, descriptor in sorted(node._descriptors.items()):  # noqa: SLF001
+        ranges = [*descriptor.floating_point_range, *descriptor.integer_range]
+        limits = f" [{ranges[0].from_value:g}, {ranges[0].to_value:g}]" if ranges else ""
+        lines.append(f"  {param} = {node.get_parameter(param).value!r}{limits}: {descriptor.description}")
+    return "\n".join(lines)
+
+
+def init_checked(name: str, args: list[str] | None, **init_kwargs) -> int | None:
+    """rclpy.init with the command line checked: an exit code when the node must not start, else None."""
+    import rclpy
+
+    argv = sys.argv if args is None else args
+    try:
+        extra = non_ros_args(args)
+        if extra and extra[0] not in ("-h", "--help"):
+            print(f"{name}: unexpected argument {' '.join(extra)}\n{usage(name)}", file=sys.stderr)
+            return 2
+        rclpy.init(args=args if not extra else argv[:1], **init_kwargs)
+    except Exception as exc:  # noqa: BLE001 - rclpy's RCLError / RCLInvalidROSArgsError on a malformed --ros-args
+        reason = re.sub(r"^.*?: (?=Couldn't)|\. Error:.*$", "", str(exc).splitlines()[0])
+        print(f"{name}: bad --ros-args: {reason}", file=sys.stderr)
+        return 2
+    return None
 
 
 def run_node(name: str, factory: Callable[[], object], args: list[str] | None = None) -> int:
-    """rclpy.init, build the node, spin until Ctrl-C/SIGTERM, shut down; one-line errors on bad parameters."""
+    """rclpy.init, build the node, spin until Ctrl-C/SIGTERM, shut down; one-line errors on bad arguments.
+
+    ``--help`` prints the node's parameters; any other non-ROS argument, a malformed or
+    unknown ``-p`` override, or a refused value is one line on stderr and exit code 2.
+    """
     import rclpy
     from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, ParameterException
     from rclpy.executors import ExternalShutdownException
 
-    rclpy.init(args=args)
+    code = init_checked(name, args)
+    if code is not None:
+        return code
     try:
         node = factory()
+        check_overrides(node)
     except (InvalidParameterValueException, InvalidParameterTypeException, ParameterException, ValueError) as exc:
         print(f"{name}: invalid parameter: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
-    code = 0
+    if non_ros_args(args):  # --help: the node was built only to describe itself
+        print(usage(name, node))
+        _close(node)
+        return 0
     try:
         spin = getattr(node, "spin", None)
         if spin is not None:
@@ -51,9 +109,22 @@ def run_node(name: str, factory: Callable[[], object], args: list[str] | None = 
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        close = getattr(node, "close", None)
-        if close is not None:
-            close()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+        _close(node)
+    return code or 0
+
+
+def non_ros_args(args: list[str] | None) -> list[str]:
+    """The command line without the program name and the ROS arguments (`RCLInvalidROSArgsError` if malformed)."""
+    from rclpy.utilities import remove_ros_args
+
+    return remove_ros_args(args=sys.argv if args is None else args)[1:]
+
+
+def _close(node) -> None:
+    import rclpy
+
+    close = getattr(node, "close", None)
+    if close is not None:
+        close()
+    node.destroy_node()
+    rclpy.try_shutdown()

@@ -18,6 +18,11 @@ Parameters (``--ros-args -p name:=value``):
   longest a message waits in memory before its chunk is written; what a
   SIGKILL can lose), ``max_buffer_mb`` (512: received but unwritten data; a
   full buffer holds the subscriptions back rather than grow).
+- ``run_settings`` (string): a JSON object of the recorded run's settings, kept in
+  the bag's ``woody`` metadata record (`woody report BAG` rebuilds its table from it).
+
+Unknown parameter names, malformed overrides and other arguments are refused
+with one line (exit code 2); ``--help`` prints this list.
 
 Timing: the MCAP ``log_time`` of a message is the **system (wall) clock at
 reception** (the middleware's reception timestamp, ns since the Unix epoch),
@@ -63,6 +68,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from woody_sim.ros_params import check_overrides, init_checked, non_ros_args, usage
 from woody_tools.mcap_io import BagError, BagWriter, message_class, message_definition, qos_profiles_yaml
 
 DEFAULT_EXCLUDE = r"^/(rosout|parameter_events)$|/_"
@@ -83,7 +89,8 @@ class Recorder(Node):
         super().__init__("recorder")
         try:
             self._declare()
-        except (ParameterException, InvalidParameterTypeException) as exc:
+            check_overrides(self)
+        except (ParameterException, InvalidParameterTypeException, ValueError) as exc:
             raise ConfigError(f"bad parameter: {exc}") from None
         p = self.get_parameter
         output = p("output").value or f"bags/{time.strftime('%Y%m%d-%H%M%S')}.mcap"
@@ -345,7 +352,13 @@ def main(args: list[str] | None = None) -> int:
         signal.signal(sig, lambda *_: stop.set())
     # rclpy's own handlers would shut the context down before the bag is finished
     # (and could interrupt finishing with KeyboardInterrupt); ours only set `stop`.
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    code = init_checked("recorder", args, signal_handler_options=SignalHandlerOptions.NO)
+    if code is not None:
+        return code
+    if non_ros_args(args):  # --help
+        print(usage("recorder").splitlines()[0] + "\n" + __doc__.split("\n\n", 1)[1].split("\n\nTiming")[0])
+        rclpy.try_shutdown()
+        return 0
     node: Recorder | None = None
     code = 0
     try:
