@@ -9,6 +9,7 @@ the graph is correct whether it runs paced (``realtime``) or as fast as it can.
 from __future__ import annotations
 
 import sys
+import threading
 import time
 
 import numpy as np
@@ -173,8 +174,10 @@ class LineSim(Node):
 
     # ------------------------------------------------------------------ loop
 
-    def spin(self) -> int:
-        """Run the line until shutdown or ``duration_s``; the executor serves the spawn service in between."""
+    def spin(self, stop: threading.Event) -> int:
+        """Run the line until ``stop`` (SIGINT/SIGTERM) or ``duration_s``; the executor serves the spawn service
+        in between."""
+        self._stop = stop
         executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
         executor.add_node(self)
         self.get_logger().info(self.summary)
@@ -182,7 +185,7 @@ class LineSim(Node):
         next_top, next_side, next_clock = 0.0, 0.0, 0.0
         pending_stamp = None
         wall_start, sim_start = time.monotonic(), self.world.time
-        while rclpy.ok(context=self.context):
+        while not stop.is_set():
             self._spawn_due()
             now = self.world.step()
             for fillet_id in self.world.take_removed():
@@ -211,7 +214,7 @@ class LineSim(Node):
                     time.sleep(ahead)
             if self.duration and now >= self.duration:
                 break
-        if pending_stamp is not None and rclpy.ok(context=self.context):
+        if pending_stamp is not None:
             self._publish_frames(self.renderer.collect(copy=False), pending_stamp)
         elapsed = time.monotonic() - wall_start
         self.get_logger().info(f"stopped at sim time {self.world.time:.2f} s after {elapsed:.1f} s wall "
@@ -224,11 +227,11 @@ class LineSim(Node):
         if not self.wait_subscribers:
             return
         self.get_logger().info(f"waiting for {self.wait_subscribers} subscribers on /top_camera/depth/image_raw")
-        while rclpy.ok(context=self.context) and self.depth_pub.get_subscription_count() < self.wait_subscribers:
+        while not self._stop.is_set() and self.depth_pub.get_subscription_count() < self.wait_subscribers:
             executor.spin_once(timeout_sec=0.05)
         # Give late joiners (a recorder discovering topics) a moment to subscribe to the rest.
         deadline = time.monotonic() + 1.0
-        while rclpy.ok(context=self.context) and time.monotonic() < deadline:
+        while not self._stop.is_set() and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
 
     def close(self) -> None:

@@ -4,13 +4,15 @@ Each parameter is declared with a description and, for numbers, a range, so
 `--ros-args -p name:=value` outside the range is refused by rclpy with the
 reason; `run_node` turns that refusal (or any ValueError a node raises while
 reading its parameters) into one clear line and a non-zero exit instead of a
-traceback, and shuts the node down cleanly on Ctrl-C / SIGTERM.
+traceback, and shuts the node down cleanly on Ctrl-C / SIGTERM (summary line, exit 0).
 """
 
 from __future__ import annotations
 
 import re
+import signal
 import sys
+import threading
 from typing import Callable
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -77,16 +79,23 @@ def init_checked(name: str, args: list[str] | None, **init_kwargs) -> int | None
 
 
 def run_node(name: str, factory: Callable[[], object], args: list[str] | None = None) -> int:
-    """rclpy.init, build the node, spin until Ctrl-C/SIGTERM, shut down; one-line errors on bad arguments.
+    """rclpy.init, build the node, spin until SIGINT/SIGTERM, close it; one-line errors on bad arguments.
 
     ``--help`` prints the node's parameters; any other non-ROS argument, a malformed or
     unknown ``-p`` override, or a refused value is one line on stderr and exit code 2.
+    SIGINT/SIGTERM only set a flag that the spin loop checks, so the node finishes the
+    callback it is in, closes (its summary line) and exits 0; rclpy's own handlers would
+    invalidate the context under a running callback. A node with ``spin(stop)`` runs its
+    own loop until the ``threading.Event`` is set.
     """
     import rclpy
     from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, ParameterException
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
-    code = init_checked(name, args)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    code = init_checked(name, args, signal_handler_options=SignalHandlerOptions.NO)
     if code is not None:
         return code
     try:
@@ -102,15 +111,21 @@ def run_node(name: str, factory: Callable[[], object], args: list[str] | None = 
         return 0
     try:
         spin = getattr(node, "spin", None)
-        if spin is not None:
-            code = int(spin() or 0)
-        else:
-            rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        code = int(spin(stop) or 0) if spin is not None else _spin_until(node, stop)
     finally:
         _close(node)
-    return code or 0
+    return code
+
+
+def _spin_until(node, stop: threading.Event) -> int:
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    while not stop.is_set():
+        executor.spin_once(timeout_sec=0.1)
+    executor.remove_node(node)
+    return 0
 
 
 def non_ros_args(args: list[str] | None) -> list[str]:

@@ -77,19 +77,24 @@ def _claim_out(out: Path, force: bool):
     return lock
 
 
-def _skipped_meshes(spec: str) -> list[str]:
-    """One line per mesh file of ``spec`` that line_sim would skip (checked here so the terminal names them)."""
+def _check_meshes(spec: str) -> list[str]:
+    """One line per mesh file of ``spec`` that line_sim would skip or convert, checked here so the terminal
+    and report.md name them (line_sim only logs them)."""
+    import warnings
+
     from woody_sim.meshes import load_mesh_set
 
     if all(item.strip() == "builtin" or item.strip().startswith("generated:") for item in spec.split(",")):
         return []
-    try:
-        meshes, errors = load_mesh_set(spec)
-    except ValueError as exc:
-        raise SystemExit(f"woody run: --meshes: {exc}") from None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            meshes, errors = load_mesh_set(spec)
+        except ValueError as exc:
+            raise SystemExit(f"woody run: --meshes: {exc}") from None
     if not meshes:
         raise SystemExit(f"woody run: --meshes {spec}: no loadable mesh ({'; '.join(errors)})")
-    return errors
+    return [f"skipped mesh {line}" for line in errors] + [f"converted mesh {w.message}" for w in caught]
 
 
 class LineMonitor:
@@ -173,15 +178,15 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("bags") / datetime.now().strftime("run-%Y%m%d-%H%M%S")
     lock = _claim_out(out, args.force)
     try:
-        skipped = _skipped_meshes(args.meshes)
-        for line in skipped:
-            print(f"woody run: skipping mesh {line}", file=sys.stderr, flush=True)
+        mesh_notes = _check_meshes(args.meshes)
+        for line in mesh_notes:
+            print(f"woody run: {line}", file=sys.stderr, flush=True)
         try:
             lease = lease_domain(share=args.share_domain)
         except (DomainInUse, ValueError) as exc:
             raise SystemExit(f"woody run: {exc}") from None
         try:
-            return _run_line(args, fillets, out, lease.domain_id, skipped)
+            return _run_line(args, fillets, out, lease.domain_id, mesh_notes)
         finally:
             lease.release()
     finally:
@@ -261,7 +266,7 @@ def _watch(monitor: LineMonitor, nodes: list[NodeProcess], fillets: int | None, 
         bar.close()
 
 
-def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, domain_id: int, skipped: list[str]) -> int:
+def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, domain_id: int, mesh_notes: list[str]) -> int:
     print(f"woody run: ROS_DOMAIN_ID={domain_id}, output {out}/", flush=True)
     nodes: list[NodeProcess] = []
     monitor = None
@@ -285,7 +290,7 @@ def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, domain_i
     if monitor is None:
         print(f"woody run: {error or 'the line did not start'}", file=sys.stderr)
         return 1
-    _write_outputs(args, fillets, out, monitor, skipped)
+    _write_outputs(args, fillets, out, monitor, mesh_notes)
     if error:
         print(f"woody run: {error}", file=sys.stderr)
         return 1
@@ -293,17 +298,17 @@ def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, domain_i
 
 
 def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, monitor: LineMonitor,
-                   skipped: list[str]) -> None:
+                   mesh_notes: list[str]) -> None:
     rows = join(monitor.spawns, monitor.verdicts)
     csv_path = write_csv(rows, out / "verdicts.csv")
     info = dict(run_settings(args, fillets))
     info.update({"fillets spawned": len(monitor.spawns), "verdicts": len(monitor.verdicts),
                  "gate commands": monitor.gate_commands, "sim time (s)": f"{monitor.sim_time:.1f}"})
-    report = build_report(rows, out, title="woody line run", run_info=info, skipped_meshes=skipped)
+    report = build_report(rows, out, title="woody line run", run_info=info, notes=mesh_notes)
     print(verdict_table(rows))
     print(f"\nbag: {out / 'line.mcap'}\nverdicts: {csv_path}\nreport: {report}\nnode logs: {out / 'logs'}/")
-    for line in skipped:
-        print(f"skipped mesh: {line}")
+    for line in mesh_notes:
+        print(line)
 
 
 def _finished(monitor: LineMonitor, fillets: int | None, args: argparse.Namespace) -> bool:

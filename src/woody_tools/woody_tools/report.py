@@ -217,11 +217,11 @@ def verdict_table(rows: Sequence[dict], limit: int = 40) -> str:
 
 
 def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody line run",
-                 run_info: dict | None = None, skipped_meshes: Sequence[str] = (), notes: Sequence[str] = ()) -> Path:
+                 run_info: dict | None = None, notes: Sequence[str] = ()) -> Path:
     """Write report.md and its PNG plots into ``out_dir``; returns the report path.
 
-    ``skipped_meshes`` (one line per mesh file line_sim could not use) and ``notes`` (e.g. where a
-    truncated bag ends) are listed at the top, so nothing left out of the figures goes unsaid.
+    ``notes`` (mesh files skipped or converted, where a truncated bag ends) are listed at the
+    top, so nothing left out of the figures goes unsaid.
     """
     import matplotlib
 
@@ -237,8 +237,7 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
     lines = [f"# {title}", ""]
     if run_info:
         lines += ["| setting | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in run_info.items()] + [""]
-    lines += [f"- {note}" for note in notes] + [f"- skipped mesh: {line}" for line in skipped_meshes]
-    lines += [""] if notes or skipped_meshes else []
+    lines += [f"- {note}" for note in notes] + ([""] if notes else [])
     lines += _markdown_body(rows, scored, side, acc)
     path = out_dir / "report.md"
     path.write_text("\n".join(lines))
