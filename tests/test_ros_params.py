@@ -82,3 +82,49 @@ def test_declared_parameters_are_read_only():
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+SUMMARIES = {"line_sim": "stopped at sim time", "segmenter": "[segmenter] ", "grader": "[grader] published",
+             "reject_gate": "[reject_gate] diverted", "recorder": "wrote "}
+
+
+def handles_stop_signals(pid: int) -> bool:
+    """True once the process catches SIGINT and SIGTERM (its handlers are installed)."""
+    import signal
+
+    try:
+        status = open(f"/proc/{pid}/status").read()
+    except OSError:
+        return False
+    caught = int(status.split("SigCgt:")[1].split()[0], 16)
+    return all(caught >> (sig - 1) & 1 for sig in (signal.SIGINT, signal.SIGTERM))
+
+
+@pytest.mark.parametrize("node,sig", [(n, "SIGINT") for n in NODES]
+                         + [("line_sim", "SIGTERM"), ("grader", "SIGTERM"), ("recorder", "SIGTERM")])
+def test_every_node_stops_cleanly_with_one_summary_line(ros_domain, tmp_path, node, sig):
+    """SIGINT to the whole process group (a terminal's Ctrl-C reaches line_sim's render process too) or SIGTERM."""
+    import signal
+    import time
+
+    from woody_tools.graph import wait_for
+
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), PYTHONUNBUFFERED="1")
+    log = tmp_path / "node.log"
+    extra = ["--ros-args", "-p", f"output:={tmp_path}/r.mcap"] if node == "recorder" else []
+    with log.open("w") as handle:
+        proc = subprocess.Popen([entry_point(node), *extra], stdout=handle, stderr=subprocess.STDOUT, env=env,
+                                start_new_session=True)
+        assert wait_for(lambda: handles_stop_signals(proc.pid), timeout=60)
+        if node == "line_sim":  # stop it while it simulates, not while it loads
+            assert wait_for(lambda: "lanes at" in log.read_text(), timeout=60)
+        time.sleep(1.5)
+        if sig == "SIGINT":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGTERM)
+        code = proc.wait(60)
+    text = log.read_text()
+    assert code == 0, text
+    assert "Traceback" not in text and "RuntimeError" not in text and "RCLError" not in text, text
+    assert sum(SUMMARIES[node] in line for line in text.splitlines()) == 1, text

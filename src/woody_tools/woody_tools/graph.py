@@ -66,6 +66,8 @@ def lease_domain(env: dict[str, str] | None = None, *, share: bool = False) -> D
     lock_dir = Path(tempfile.gettempdir()) / "woody-domains"
     lock_dir.mkdir(exist_ok=True)
     if env.get("ROS_DOMAIN_ID"):
+        if not env["ROS_DOMAIN_ID"].strip().isdigit() or int(env["ROS_DOMAIN_ID"]) > MAX_DOMAIN_ID:
+            raise ValueError(f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']!r} is not a domain id (0..{MAX_DOMAIN_ID})")
         domain_id = int(env["ROS_DOMAIN_ID"])
         handle = _try_lock(lock_dir, domain_id)
         if handle is None and not share:

@@ -44,16 +44,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run on an exported ROS_DOMAIN_ID even when another woody run holds it (they mix)")
 
 
+class RunRefused(Exception):
+    """An input `woody run` cannot work with; the message is one line (printed, exit code 2)."""
+
+
 def _validate(args: argparse.Namespace) -> None:
     low, high = SPEED_RANGE_FPM
     if not 1 <= args.lanes <= 6:
-        raise SystemExit(f"woody run: --lanes must be 1..6, got {args.lanes}")
+        raise RunRefused(f"--lanes must be 1..6, got {args.lanes}")
     if not low <= args.speed_fpm <= high:
-        raise SystemExit(f"woody run: --speed-fpm must be in [{low:g}, {high:g}], got {args.speed_fpm}")
+        raise RunRefused(f"--speed-fpm must be in [{low:g}, {high:g}], got {args.speed_fpm}")
     if args.fillets is not None and args.fillets < 1:
-        raise SystemExit(f"woody run: --fillets must be >= 1, got {args.fillets}")
+        raise RunRefused(f"--fillets must be >= 1, got {args.fillets}")
     if not all(0 <= k < math.inf for k in args.k):
-        raise SystemExit(f"woody run: --k values must be finite and >= 0, got {' '.join(f'{k:g}' for k in args.k)}")
+        raise RunRefused(f"--k values must be finite and >= 0, got {' '.join(f'{k:g}' for k in args.k)}")
 
 
 def _claim_out(out: Path, force: bool):
@@ -62,16 +66,16 @@ def _claim_out(out: Path, force: bool):
         out.mkdir(parents=True, exist_ok=True)
         lock = open(out / ".woody-run.lock", "w")
     except OSError as exc:
-        raise SystemExit(f"woody run: --out {out}: cannot write there ({exc.strerror or exc})") from None
+        raise RunRefused(f"--out {out}: cannot write there ({exc.strerror or exc})") from None
     try:
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
         lock.close()
-        raise SystemExit(f"woody run: --out {out} is in use by another woody run; choose another folder") from None
+        raise RunRefused(f"--out {out} is in use by another woody run; choose another folder") from None
     bag = out / "line.mcap"
     if bag.exists() and not force:
         lock.close()
-        raise SystemExit(f"woody run: --out {out} already holds a run ({bag.name}); pass --force to overwrite it "
+        raise RunRefused(f"--out {out} already holds a run ({bag.name}); pass --force to overwrite it "
                          "or choose another folder")
     bag.unlink(missing_ok=True)
     return lock
@@ -84,16 +88,14 @@ def _check_meshes(spec: str) -> list[str]:
 
     from woody_sim.meshes import load_mesh_set
 
-    if all(item.strip() == "builtin" or item.strip().startswith("generated:") for item in spec.split(",")):
-        return []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             meshes, errors = load_mesh_set(spec)
         except ValueError as exc:
-            raise SystemExit(f"woody run: --meshes: {exc}") from None
+            raise RunRefused(f"--meshes: {exc}") from None
     if not meshes:
-        raise SystemExit(f"woody run: --meshes {spec}: no loadable mesh ({'; '.join(errors)})")
+        raise RunRefused(f"--meshes {spec}: no loadable mesh ({'; '.join(errors)})")
     return [f"skipped mesh {line}" for line in errors] + [f"converted mesh {w.message}" for w in caught]
 
 
@@ -173,24 +175,33 @@ def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, obj
 
 
 def run(args: argparse.Namespace) -> int:
+    try:
+        return _run_checked(args)
+    except RunRefused as exc:
+        print(f"woody run: {exc}", file=sys.stderr)
+        return 2
+
+
+def _run_checked(args: argparse.Namespace) -> int:
+    """Every input checked before anything is written: arguments, meshes, the domain, the output folder."""
     _validate(args)
     fillets = args.fillets if args.fillets is not None or args.duration is not None else 12
     out = Path(args.out) if args.out else Path("bags") / datetime.now().strftime("run-%Y%m%d-%H%M%S")
-    lock = _claim_out(out, args.force)
+    mesh_notes = _check_meshes(args.meshes)
     try:
-        mesh_notes = _check_meshes(args.meshes)
+        lease = lease_domain(share=args.share_domain)
+    except (DomainInUse, ValueError) as exc:
+        raise RunRefused(str(exc)) from None
+    try:
+        lock = _claim_out(out, args.force)
         for line in mesh_notes:
             print(f"woody run: {line}", file=sys.stderr, flush=True)
         try:
-            lease = lease_domain(share=args.share_domain)
-        except (DomainInUse, ValueError) as exc:
-            raise SystemExit(f"woody run: {exc}") from None
-        try:
             return _run_line(args, fillets, out, lease.domain_id, mesh_notes)
         finally:
-            lease.release()
+            lock.close()
     finally:
-        lock.close()
+        lease.release()
 
 
 def _start_nodes(args: argparse.Namespace, fillets: int | None, out: Path, domain_id: int) -> list[NodeProcess]:
