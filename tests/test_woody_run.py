@@ -155,7 +155,7 @@ def test_awkward_paths_mesh_problems_and_settings_survive_a_run(tmp_path):
     assert f"bag: {out / 'line.mcap'}\n" in result.stdout and "ROS_DOMAIN_ID=228" in result.stdout
     logs = {log.stem: log.read_text() for log in (out / "logs").glob("*.log")}
     summaries = {"line_sim": "stopped at sim time", "segmenter": "depth frames received",
-                 "grader": "published 3 verdicts", "reject_gate": "diverted", "recorder": "MB on disk"}
+                 "grader": "published 3 verdicts", "reject_gate": "[reject_gate] diverted", "recorder": "MB on disk"}
     for node, summary in summaries.items():
         assert "Traceback" not in logs[node] and logs[node].count(summary) == 1, (node, logs[node][-2000:])
     assert "written/published per topic: /clock " in logs["recorder"]
