@@ -295,6 +295,17 @@ class Recorder(Node):
             with self._cond:
                 self._cond.notify_all()
 
+    def drain(self, executor, quiet_s: float = 0.3, limit_s: float = 5.0) -> None:
+        """Take what the middleware still holds for us before closing: a recorder lagging behind a busy
+        graph must not drop the last messages (e.g. the final verdict) because the stop signal came first."""
+        deadline = time.monotonic() + limit_s
+        last, quiet_since = -1, time.monotonic()
+        while time.monotonic() < deadline and time.monotonic() - quiet_since < quiet_s:
+            executor.spin_once(timeout_sec=0.05)
+            received = sum(seen[2] for seen in self._seen.values())
+            if received != last:
+                last, quiet_since = received, time.monotonic()
+
     def drops(self) -> dict[str, tuple[int, int | None]]:
         """Per topic (written, published while subscribed): the publisher's sequence numbers count what it
         sent, so a gap is a message lost in transport. ``None`` when several publishers share the topic
@@ -367,6 +378,7 @@ def main(args: list[str] | None = None) -> int:
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
+        node.drain(executor)
     except ConfigError as exc:
         rclpy.logging.get_logger("recorder").error(str(exc))
         code = 2
