@@ -89,8 +89,9 @@ def other_run_holds(tmp_path):
             handle = open(Path(value) / ".woody-run.lock", "w")
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
             held.append(handle)
-        else:
-            held.append(lease_domain({"ROS_DOMAIN_ID": value}))
+        else:  # a free domain, held the way a running `woody run` holds it
+            held.append(lease_domain({}))
+            return held[-1].domain_id
 
     yield hold
     for item in held:
@@ -103,7 +104,7 @@ def other_run_holds(tmp_path):
     (None, ["--out", "/proc/woody/run"], "--out /proc/woody/run: cannot write there"),
     ("existing", ["--out", "{tmp}/run"], "already holds a run (line.mcap); pass --force"),
     ("locked", ["--out", "{tmp}/run"], "is in use by another woody run"),
-    ("domain", ["--out", "{tmp}/run"], "ROS_DOMAIN_ID=229 (exported) is in use by another woody run"),
+    ("domain", ["--out", "{tmp}/run"], "ROS_DOMAIN_ID={domain} (exported) is in use by another woody run"),
     ("garbage", ["--meshes", "{tmp}/meshes"], "no loadable mesh ({tmp}/meshes/a.stl: not a valid STL"),
     (None, ["--meshes", "generated:x"], "--meshes: mesh spec 'generated:x'"),
 ])
@@ -115,8 +116,7 @@ def test_bad_run_input_is_refused_with_one_line(tmp_path, other_run_holds, setup
     elif setup == "locked":
         other_run_holds("out", str(tmp_path / "run"))
     elif setup == "domain":
-        env["ROS_DOMAIN_ID"] = "229"
-        other_run_holds("domain", "229")
+        env["ROS_DOMAIN_ID"] = str(other_run_holds("domain", ""))
     elif setup == "garbage":
         (tmp_path / "meshes").mkdir()
         (tmp_path / "meshes" / "a.stl").write_bytes(bytes(300))
@@ -124,7 +124,8 @@ def test_bad_run_input_is_refused_with_one_line(tmp_path, other_run_holds, setup
     result = woody_run("--fillets", "1", *[a.format(tmp=tmp_path) for a in args], env=env)
     assert result.returncode == 2, result.stderr
     lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
-    assert len(lines) == 1 and lines[0].startswith("woody run: ") and message.format(tmp=tmp_path) in lines[0], lines
+    expected = message.format(tmp=tmp_path, domain=env.get("ROS_DOMAIN_ID"))
+    assert len(lines) == 1 and lines[0].startswith("woody run: ") and expected in lines[0], lines
     if setup == "existing":
         assert (tmp_path / "run" / "line.mcap").read_bytes() == b"a recording worth keeping"
     assert not (tmp_path / "default").exists()  # a refused run writes nothing
@@ -146,13 +147,15 @@ def test_awkward_paths_mesh_problems_and_settings_survive_a_run(tmp_path):
     trimesh.Trimesh(raw.vertices * 1000.0, raw.faces, process=False).export(meshes / "scan_mm.stl")
     (meshes / "broken.stl").write_bytes(bytes(1000))
     out = tmp_path / "run #1: line"
-    env = dict(os.environ, ROS_DOMAIN_ID="228")
+    with lease_domain({}) as lease:  # free now; exported below as a user's .bashrc would
+        domain = lease.domain_id
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
     result = woody_run("--fillets", "3", "--meshes", str(meshes), "--out", str(out), env=env, timeout=300)
     assert result.returncode == 0, result.stderr[-3000:]
     for text in (result.stdout, (out / "report.md").read_text()):
         assert f"skipped mesh {meshes / 'broken.stl'}: not a valid STL" in text
         assert f"converted mesh {meshes / 'scan_mm.stl'}: " in text and "taken as mm" in text
-    assert f"bag: {out / 'line.mcap'}\n" in result.stdout and "ROS_DOMAIN_ID=228" in result.stdout
+    assert f"bag: {out / 'line.mcap'}\n" in result.stdout and f"ROS_DOMAIN_ID={domain}," in result.stdout
     logs = {log.stem: log.read_text() for log in (out / "logs").glob("*.log")}
     summaries = {"line_sim": "stopped at sim time", "segmenter": "depth frames received",
                  "grader": "published 3 verdicts", "reject_gate": "[reject_gate] diverted", "recorder": "MB on disk"}
@@ -168,3 +171,24 @@ def test_awkward_paths_mesh_problems_and_settings_survive_a_run(tmp_path):
     rebuilt = (tmp_path / "re" / "report.md").read_text()
     assert f"| meshes | {meshes} |" in rebuilt and "| fillets spawned | 3 |" in rebuilt
     assert woody_run("--fillets", "1", "--out", str(out)).returncode == 2  # never overwritten without --force
+
+
+def test_a_run_on_an_exported_domain_with_other_nodes_refuses(tmp_path):
+    """Another program (not a woody run, so no lock) already on the user's ROS_DOMAIN_ID: refused, nothing written."""
+    import rclpy
+
+    with lease_domain({}) as lease:  # a domain no test uses, then unlocked as a user's domain would be
+        ros_domain = lease.domain_id
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=ros_domain)
+    node = rclpy.create_node("someone_elses_node", context=context)
+    try:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+        result = woody_run("--fillets", "1", "--out", str(tmp_path / "run"), env=env)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
+    assert len(lines) == 1 and "already has nodes (/someone_elses_node)" in lines[0], lines
+    assert not (tmp_path / "run").exists()

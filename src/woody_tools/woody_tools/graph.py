@@ -28,8 +28,10 @@ MAX_DOMAIN_ID = 232
 class DomainLease:
     """A ROS domain id held exclusively by this process until `release()`."""
 
-    def __init__(self, domain_id: int, lock_file: IO | None) -> None:
+    def __init__(self, domain_id: int, lock_file: IO | None, exported: bool = False) -> None:
         self.domain_id = domain_id
+        self.exported = exported
+        """True for the user's own ROS_DOMAIN_ID, which programs other than woody may share."""
         self._lock_file = lock_file
 
     def release(self) -> None:
@@ -74,7 +76,7 @@ def lease_domain(env: dict[str, str] | None = None, *, share: bool = False) -> D
             raise DomainInUse(f"ROS_DOMAIN_ID={domain_id} (exported) is in use by another woody run on this "
                               "machine; the two would mix. Unset ROS_DOMAIN_ID to get a private domain, "
                               "or pass --share-domain to mix on purpose")
-        return DomainLease(domain_id, handle)
+        return DomainLease(domain_id, handle, exported=True)
     candidates = list(range(1, MAX_DOMAIN_ID + 1))
     random.shuffle(candidates)
     for domain_id in candidates:

@@ -106,11 +106,13 @@ class LineMonitor:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
         from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
 
+        self.domain_id = domain_id
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
+        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("woody_run_monitor", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -192,16 +194,32 @@ def _run_checked(args: argparse.Namespace) -> int:
         lease = lease_domain(share=args.share_domain)
     except (DomainInUse, ValueError) as exc:
         raise RunRefused(str(exc)) from None
+    monitor = None
     try:
+        monitor = LineMonitor(lease.domain_id)
+        if lease.exported and not args.share_domain:
+            _refuse_foreign_nodes(monitor, lease.domain_id)
         lock = _claim_out(out, args.force)
         for line in mesh_notes:
             print(f"woody run: {line}", file=sys.stderr, flush=True)
         try:
-            return _run_line(args, fillets, out, lease.domain_id, mesh_notes)
+            return _run_line(args, fillets, out, monitor, mesh_notes)
         finally:
             lock.close()
     finally:
+        if monitor is not None:
+            monitor.close()
         lease.release()
+
+
+def _refuse_foreign_nodes(monitor: LineMonitor, domain_id: int, seconds: float = 1.5) -> None:
+    """On an exported ROS_DOMAIN_ID other programs may already run: the line would mix with them."""
+    monitor.spin(seconds)  # time for discovery
+    foreign = sorted({f"{ns.rstrip('/')}/{name}" for name, ns in monitor.node.get_node_names_and_namespaces()
+                      if name != monitor.node.get_name()})
+    if foreign:
+        raise RunRefused(f"ROS_DOMAIN_ID={domain_id} (exported) already has nodes ({', '.join(foreign)}); the line "
+                         "would mix with them. Unset ROS_DOMAIN_ID to get a private domain, or pass --share-domain")
 
 
 def _start_nodes(args: argparse.Namespace, fillets: int | None, out: Path, domain_id: int) -> list[NodeProcess]:
@@ -277,10 +295,10 @@ def _watch(monitor: LineMonitor, nodes: list[NodeProcess], fillets: int | None, 
         bar.close()
 
 
-def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, domain_id: int, mesh_notes: list[str]) -> int:
-    print(f"woody run: ROS_DOMAIN_ID={domain_id}, output {out}/", flush=True)
+def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, monitor: LineMonitor,
+              mesh_notes: list[str]) -> int:
+    print(f"woody run: ROS_DOMAIN_ID={monitor.domain_id}, output {out}/", flush=True)
     nodes: list[NodeProcess] = []
-    monitor = None
     stopping = {"signal": None}
 
     def on_signal(signum, _frame):
@@ -289,18 +307,12 @@ def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, domain_i
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     error = None
     try:
-        nodes = _start_nodes(args, fillets, out, domain_id)
-        monitor = LineMonitor(domain_id)
+        nodes = _start_nodes(args, fillets, out, monitor.domain_id)
         error = _watch(monitor, nodes, fillets, args, stopping)
     finally:
         _stop_nodes(nodes)
-        if monitor is not None:
-            monitor.close()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    if monitor is None:
-        print(f"woody run: {error or 'the line did not start'}", file=sys.stderr)
-        return 1
     _write_outputs(args, fillets, out, monitor, mesh_notes)
     if error:
         print(f"woody run: {error}", file=sys.stderr)
