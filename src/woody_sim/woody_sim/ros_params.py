@@ -34,8 +34,8 @@ def declare(node, name: str, default, description: str, low: float | None = None
 def _typed(name: str, default, value):
     """An override rclpy could not type (``-p name:=[]``) comes back as None: refuse it with the expected form."""
     if value is None and default is not None:
-        raise ValueError(f"parameter {name}: needs a value like {list(default) if isinstance(default, (list, tuple)) else default!r}, "
-                         "got an empty or untyped one")
+        example = list(default) if isinstance(default, (list, tuple)) else default
+        raise ValueError(f"parameter {name}: needs a value like {example!r}, got an empty or untyped one")
     return value
 
 

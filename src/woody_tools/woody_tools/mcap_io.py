@@ -508,8 +508,8 @@ def read_bag(path: str | os.PathLike, topics: Iterable[str] | None = None) -> It
     A complete file is read through its summary in log-time order. A file without a
     summary (a killed recorder) is read as a stream in file order: everything readable
     is yielded, then `BagError` says ``"<path>: truncated after N messages at t=...s"``
-    (N and t over every topic of the file, t from its first message). Missing file / not an MCAP: `BagError` at the first
-    ``next()``.
+    (N and t over every topic of the file, t from its first message). Missing file /
+    not an MCAP: `BagError` at the first ``next()``.
     """
     path, handle = _open(path)
     wanted = None if topics is None else set(topics)
