@@ -86,7 +86,7 @@ def _check_meshes(spec: str) -> list[str]:
     and report.md name them (line_sim only logs them)."""
     import warnings
 
-    from woody_sim.meshes import load_mesh_set
+    from woody_sim.meshes import MeshWarning, load_mesh_set
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -96,7 +96,8 @@ def _check_meshes(spec: str) -> list[str]:
             raise RunRefused(f"--meshes: {exc}") from None
     if not meshes:
         raise RunRefused(f"--meshes {spec}: no loadable mesh ({'; '.join(errors)})")
-    return [f"skipped mesh {line}" for line in errors] + [f"converted mesh {w.message}" for w in caught]
+    converted = [f"converted mesh {w.message}" for w in caught if issubclass(w.category, MeshWarning)]
+    return [f"skipped mesh {line}" for line in errors] + converted
 
 
 class LineMonitor:
