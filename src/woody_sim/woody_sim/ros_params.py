@@ -135,9 +135,20 @@ def non_ros_args(args: list[str] | None) -> list[str]:
     return remove_ros_args(args=sys.argv if args is None else args)[1:]
 
 
-def _close(node) -> None:
-    import rclpy
+def _close(node, ack_budget_s: float = 2.0) -> None:
+    """Close the node (its summary line), let subscribers acknowledge what its reliable publishers sent
+    (a verdict published just before the stop must still reach the recorder), then destroy it."""
+    import time
 
+    import rclpy
+    from rclpy.duration import Duration
+    from rclpy.qos import ReliabilityPolicy
+
+    deadline = time.monotonic() + ack_budget_s
+    for publisher in node.publishers:
+        left = deadline - time.monotonic()
+        if left > 0 and publisher.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
+            publisher.wait_for_all_acked(Duration(seconds=left))
     close = getattr(node, "close", None)
     if close is not None:
         close()
