@@ -26,12 +26,14 @@ MAX_DOMAIN_ID = 232
 
 
 class DomainLease:
-    """A ROS domain id held exclusively by this process until `release()`."""
+    """A ROS domain id held exclusively by this process until `release()`.
+
+    ``exported`` is True for the user's own ROS_DOMAIN_ID, which programs other than woody may share.
+    """
 
     def __init__(self, domain_id: int, lock_file: IO | None, exported: bool = False) -> None:
         self.domain_id = domain_id
         self.exported = exported
-        """True for the user's own ROS_DOMAIN_ID, which programs other than woody may share."""
         self._lock_file = lock_file
 
     def release(self) -> None:
