@@ -168,3 +168,49 @@ def test_mesh_set_specs() -> None:
     for bad in ("generated:x", "generated:0", "", "no/such/folder"):
         with pytest.raises(ValueError):
             load_mesh_set(bad)
+
+
+# ---------------------------------------------------------------- files as users bring them (issue 14)
+
+def reference_saved_as(tmp_path, suffix: str, scale: float = 1.0, nan_vertex: int | None = None):
+    raw = trimesh.load(BUILTIN_DIR / "seed0001.obj", force="mesh", process=False)
+    vertices = raw.vertices * scale
+    if nan_vertex is not None:
+        vertices[nan_vertex] = np.nan
+    path = tmp_path / f"seed0001{suffix}"
+    trimesh.Trimesh(vertices, raw.faces, process=False).export(path)
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".ply", ".obj"])
+def test_the_projects_meshes_resaved_load_as_the_same_fillet(tmp_path, references, suffix) -> None:
+    fillet = load_mesh(reference_saved_as(tmp_path, suffix))
+    assert fillet.mesh.is_watertight
+    assert np.allclose(fillet.mesh.extents, references[1].mesh.extents, atol=1e-6)
+
+
+@pytest.mark.parametrize("scale,unit", [(1000.0, "mm"), (100.0, "cm")])
+def test_a_mesh_in_mm_or_cm_is_converted_with_a_warning(tmp_path, references, scale, unit) -> None:
+    from woody_sim.meshes import MeshWarning
+
+    path = reference_saved_as(tmp_path, ".stl", scale=scale)
+    with pytest.warns(MeshWarning, match=rf"seed0001\.stl: .* taken as {unit} and converted to metres"):
+        fillet = load_mesh(path)
+    assert np.allclose(fillet.mesh.extents, references[1].mesh.extents, rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("make", "reason"),
+    [
+        (lambda tmp: str(reference_saved_as(tmp, ".obj", nan_vertex=7)), "1 vertices with NaN or infinite coordinates"),
+        (lambda tmp: str(reference_saved_as(tmp, ".stl", scale=1e6)), "units long, not a fillet"),
+        (lambda tmp: (tmp / "noise.stl").write_bytes(np.random.default_rng(1).bytes(3000)) and str(tmp / "noise.stl"),
+         "not a valid STL"),
+    ],
+)
+def test_bad_user_meshes_name_the_real_problem(tmp_path, make, reason: str) -> None:
+    path = make(tmp_path)
+    with pytest.raises(MeshError) as info:
+        load_mesh(path)
+    message = str(info.value)
+    assert message.startswith(path) and reason in message and "\n" not in message

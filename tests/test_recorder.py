@@ -95,7 +95,8 @@ def test_stopped_recorder_leaves_a_complete_bag(ros_domain, spawn_helper, tmp_pa
     finally:
         recorder.stop()
     log = recorder.log_tail(5)
-    assert "messages" in log and "/vision/tracks 20" in log, log  # the closing line with counts
+    assert "messages" in log and "/vision/tracks 20/20" in log, log  # the closing line: written/published
+    assert " MB on disk " in log and "0 lost in transport" in log, log
     # /line/ground_truth message 0 was latched before the recorder subscribed: recorded all the same
     check_bag(tmp_path / "run.mcap", expected, COUNT)
 
@@ -142,6 +143,25 @@ def test_killed_recorder_leaves_its_written_chunks_readable(ros_domain, spawn_he
     assert recovered >= safe * len(TOPICS)
     summary = bag_summary(path)
     assert not summary["complete"] and "truncated" in summary["error"]
+
+    # `woody bag recover` turns it into a complete, indexed bag that rosbags and mcap open
+    import subprocess
+
+    from mcap.reader import make_reader
+    from rosbags.highlevel import AnyReader
+
+    from woody_tools.graph import entry_point
+
+    fixed = tmp_path / "fixed.mcap"
+    result = subprocess.run([entry_point("woody"), "bag", "recover", str(path), str(fixed)], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0 and "truncated after" in result.stdout, result.stderr
+    assert bag_summary(fixed)["complete"] and bag_summary(fixed)["message_count"] >= safe * len(TOPICS)
+    with AnyReader([fixed]) as reader:
+        clock_connections = [c for c in reader.connections if c.topic == "/clock"]
+        assert len(list(reader.messages(connections=clock_connections))) == len(clock)
+    with open(fixed, "rb") as handle:
+        assert make_reader(handle).get_summary().statistics.message_count == bag_summary(fixed)["message_count"]
 
 
 def test_bad_parameters_fail_with_one_clear_line(ros_domain, tmp_path):

@@ -27,6 +27,9 @@ import numpy as np
 FPM_TO_MPS = 0.3048 / 60.0
 """Feet per minute to metres per second (100 FPM = 0.508 m/s)."""
 
+SPEED_RANGE_FPM = (1.0, 400.0)
+"""Line speeds every entry point accepts (woody run, line_sim, reject_gate), inclusive."""
+
 
 def fpm_to_mps(speed_fpm: float) -> float:
     """Convert the user-facing line speed in feet per minute to m/s."""

@@ -9,6 +9,7 @@ the graph is correct whether it runs paced (``realtime``) or as fast as it can.
 from __future__ import annotations
 
 import sys
+import threading
 import time
 
 import numpy as np
@@ -22,7 +23,7 @@ from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
 
 from woody_common.calibration import load_calibration
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps, top_camera_preset
+from woody_sim.line_geometry import SPEED_RANGE_FPM, LineGeometry, fpm_to_mps, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.rendering import RenderProcess, camera_info_fields
@@ -44,7 +45,7 @@ class LineSim(Node):
         super().__init__("line_sim")
         lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
         speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
-                            "commercial line speeds).", 1.0, 400.0)
+                            "commercial line speeds).", *SPEED_RANGE_FPM)
         self.k_values = [float(k) for k in declare(self, "k_values", [0.0, 100.0],
                                                    "Stiffness values (N*m/rad) drawn per spawned fillet.")]
         mesh_spec = declare(self, "meshes", "builtin", "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
@@ -78,8 +79,8 @@ class LineSim(Node):
                            0.0, 10.0)
         self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
                                         "subscribers listen to the top depth image.", 0, 100)
-        if not self.k_values or any(k < 0 for k in self.k_values):
-            raise ValueError(f"k_values must be a non-empty list of values >= 0, got {self.k_values}")
+        if not self.k_values or not all(0 <= k < float("inf") for k in self.k_values):
+            raise ValueError(f"k_values must be a non-empty list of finite values >= 0, got {self.k_values}")
         if side_lane >= lanes:
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
 
@@ -120,7 +121,7 @@ class LineSim(Node):
             self.create_subscription(FilletTrackArray, "/vision/tracks",
                                      lambda m: self.pacer.ack(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9),
                                      QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
-        self.get_logger().info(
+        self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
             f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
             f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
             f"side {side_rate:g} Hz on lane {self.geometry.watched_lane}")
@@ -193,15 +194,18 @@ class LineSim(Node):
 
     # ------------------------------------------------------------------ loop
 
-    def spin(self) -> int:
-        """Run the line until shutdown or ``duration_s``; the executor serves the spawn service in between."""
+    def spin(self, stop: threading.Event) -> int:
+        """Run the line until ``stop`` (SIGINT/SIGTERM) or ``duration_s``; the executor serves the spawn service
+        in between."""
+        self._stop = stop
         executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
         executor.add_node(self)
+        self.get_logger().info(self.summary)
         self._wait_for_subscribers(executor)
         next_top, next_side, next_clock = 0.0, 0.0, 0.0
         pending_stamp = None
         wall_start, sim_start = time.monotonic(), self.world.time
-        while rclpy.ok(context=self.context):
+        while not stop.is_set():
             self._spawn_due()
             now = self.world.step()
             for fillet_id in self.world.take_removed():
@@ -236,7 +240,7 @@ class LineSim(Node):
                     time.sleep(ahead)
             if self.duration and now >= self.duration:
                 break
-        if pending_stamp is not None and rclpy.ok(context=self.context):
+        if pending_stamp is not None:
             self._publish_frames(self.renderer.collect(copy=False), pending_stamp)
         elapsed = time.monotonic() - wall_start
         self.get_logger().info(f"stopped at sim time {self.world.time:.2f} s after {elapsed:.1f} s wall "
@@ -250,7 +254,7 @@ class LineSim(Node):
         if self.pacer is None:
             return
         start, stalls = time.monotonic(), self.pacer.stalls
-        while rclpy.ok(context=self.context) and self.pacer.must_wait(now, time.monotonic() - start):
+        while not self._stop.is_set() and self.pacer.must_wait(now, time.monotonic() - start):
             executor.spin_once(timeout_sec=0.005)
         if self.pacer.stalls > stalls and self.pacer.stalls == 1:
             self.get_logger().warning(f"/vision/tracks silent for {self.pacer.stall_s:g} s: running on without it")
@@ -259,11 +263,11 @@ class LineSim(Node):
         if not self.wait_subscribers:
             return
         self.get_logger().info(f"waiting for {self.wait_subscribers} subscribers on /top_camera/depth/image_raw")
-        while rclpy.ok(context=self.context) and self.depth_pub.get_subscription_count() < self.wait_subscribers:
+        while not self._stop.is_set() and self.depth_pub.get_subscription_count() < self.wait_subscribers:
             executor.spin_once(timeout_sec=0.05)
         # Give late joiners (a recorder discovering topics) a moment to subscribe to the rest.
         deadline = time.monotonic() + 1.0
-        while rclpy.ok(context=self.context) and time.monotonic() < deadline:
+        while not self._stop.is_set() and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
 
     def close(self) -> None:

@@ -284,12 +284,19 @@ def _boundary_loops(faces: np.ndarray) -> list[list[int]] | None:
 
 
 def _repair(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
-    """Drop duplicate faces and close small holes; raise MeshError if the surface stays open.
+    """Merge coincident vertices, drop degenerate and duplicate faces, close small holes; MeshError if still open.
 
-    trimesh's loader has already merged coincident vertices (process=True).
+    STL has no shared vertices and PLY/OBJ exporters may split them, so the same surface
+    arrives with coincident vertices, and faces that collapse onto an edge once they are
+    merged; dropping those makes it the surface it was (slivers with distinct vertices stay).
     """
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    faces = mesh.faces
+    mesh.update_faces((faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0]))
     mesh.update_faces(mesh.unique_faces())
     mesh.remove_unreferenced_vertices()
+    if len(mesh.faces) == 0:
+        raise MeshError(f"{label}: every triangle is degenerate (repeats a vertex)")
     loops = _boundary_loops(mesh.faces)
     if loops is None:
         raise MeshError(f"{label}: open mesh with a non-manifold boundary")
@@ -305,8 +312,65 @@ def _repair(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
     return mesh
 
 
+FILLET_LENGTH_M = (0.1, 0.3)
+"""How long a real fillet is (m); a mesh this long in mm or cm is converted, anything else refused."""
+UNITS = (("m", 1.0), ("cm", 0.01), ("mm", 0.001))
+
+
+class MeshWarning(UserWarning):
+    """A mesh was usable only after a conversion (e.g. millimetres to metres); one line naming the file."""
+
+
+def _to_metres(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
+    """Scale a mesh drawn in cm or mm (the usual scanner unit) to metres, judged from its length."""
+    import warnings
+
+    length = float(mesh.extents.max())
+    low, high = FILLET_LENGTH_M
+    for unit, scale in UNITS:
+        if low * 0.5 <= length * scale <= high * 2.0:
+            if scale != 1.0:
+                mesh.apply_scale(scale)
+                warnings.warn(f"{label}: {length:g} units long, taken as {unit} and converted to metres "
+                              f"({length * scale:.3f} m)", MeshWarning, stacklevel=3)
+            return mesh
+    raise MeshError(f"{label}: {length:g} units long, not a fillet ({low:g}-{high:g} m) in m, cm or mm")
+
+
+def _check_stl(path: Path, label: str) -> None:
+    """A binary STL's size follows from its triangle count; anything else must be ASCII ``solid ...`` text."""
+    data = path.read_bytes()
+    if len(data) >= 84:
+        count = int.from_bytes(data[80:84], "little")
+        if len(data) == 84 + 50 * count:
+            return
+    head = data[:512].lstrip()
+    if head[:5].lower() == b"solid" and all(b in b"\t\n\r" or 32 <= b < 127 for b in head):
+        return
+    raise MeshError(f"{label}: not a valid STL (neither ASCII 'solid ...' text nor a binary STL whose size "
+                    f"matches its triangle count)")
+
+
+def _read(path: Path, label: str) -> trimesh.Trimesh:
+    """The file's triangles as stored (no processing yet, so bad coordinates are seen as they are)."""
+    if path.suffix.lower() == ".stl":
+        _check_stl(path, label)
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for malformed files
+        reason = str(exc).splitlines()[0] if str(exc) and not isinstance(exc, ImportError) else "unparseable data"
+        raise MeshError(f"{label}: not a readable {path.suffix.lstrip('.').upper()} mesh ({reason})") from exc
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise MeshError(f"{label}: no triangles in file")
+    bad = ~np.isfinite(loaded.vertices).all(axis=1)
+    if bad.any():
+        raise MeshError(f"{label}: {int(bad.sum())} vertices with NaN or infinite coordinates "
+                        f"(first: vertex {int(np.argmax(bad))})")
+    return loaded
+
+
 def load_mesh(path: str | Path) -> FilletMesh:
-    """Load an OBJ/PLY/STL fillet, repair small defects and move it to the canonical frame."""
+    """Load an OBJ/PLY/STL fillet (m, cm or mm), repair small defects and move it to the canonical frame."""
     path = Path(path)
     label = str(path)
     if not path.is_file():
@@ -315,16 +379,7 @@ def load_mesh(path: str | Path) -> FilletMesh:
         raise MeshError(f"{label}: unsupported format '{path.suffix}' (use {', '.join(MESH_SUFFIXES)})")
     if path.stat().st_size == 0:
         raise MeshError(f"{label}: empty file")
-    try:
-        loaded = trimesh.load(path, force="mesh", process=True)
-    except Exception as exc:  # trimesh raises many types for malformed files
-        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise MeshError(f"{label}: not a readable mesh ({reason})") from exc
-    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
-        raise MeshError(f"{label}: no triangles in file")
-    if not np.isfinite(loaded.vertices).all():
-        raise MeshError(f"{label}: non-finite vertex coordinates")
-    mesh = orient_canonical(_repair(loaded, label))
+    mesh = orient_canonical(_repair(_to_metres(_read(path, label), label), label))
     if mesh.extents.min() < MIN_EXTENT:
         dims = " x ".join(f"{e * 1000:.1f}" for e in mesh.extents)
         raise MeshError(f"{label}: degenerate mesh ({dims} mm; every side must be at least {MIN_EXTENT * 1000:.0f} mm)")

@@ -42,6 +42,7 @@ import math
 import multiprocessing as mp
 import multiprocessing.connection as mpc
 import os
+import signal
 import time
 import traceback
 import weakref
@@ -492,6 +493,8 @@ def _validate_poses(known: Mapping[int, Any], poses: Mapping[int, np.ndarray]) -
 
 # --------------------------------------------------------------------------- process wrapper
 def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool, bool], buffers: dict) -> None:
+    # Ctrl-C in a terminal reaches the whole process group; the parent decides when rendering stops.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     parent = mp.parent_process()
     sentinel = parent.sentinel if parent is not None else None
     try:

@@ -4,12 +4,15 @@ Each parameter is declared with a description and, for numbers, a range, so
 `--ros-args -p name:=value` outside the range is refused by rclpy with the
 reason; `run_node` turns that refusal (or any ValueError a node raises while
 reading its parameters) into one clear line and a non-zero exit instead of a
-traceback, and shuts the node down cleanly on Ctrl-C / SIGTERM.
+traceback, and shuts the node down cleanly on Ctrl-C / SIGTERM (summary line, exit 0).
 """
 
 from __future__ import annotations
 
+import re
+import signal
 import sys
+import threading
 from typing import Callable
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -17,7 +20,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 def declare(node, name: str, default, description: str, low: float | None = None, high: float | None = None):
     """Declare a parameter with a descriptor (and an inclusive range for numbers); return its value."""
-    descriptor = ParameterDescriptor(description=description)
+    descriptor = ParameterDescriptor(description=description, read_only=True)  # every node reads them at start-up
     if low is not None and high is not None:
         if isinstance(default, bool):
             raise TypeError(f"parameter {name}: a bool has no range")
@@ -25,35 +28,129 @@ def declare(node, name: str, default, description: str, low: float | None = None
             descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
         else:
             descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high))]
-    return node.declare_parameter(name, default, descriptor).value
+    return _typed(name, default, node.declare_parameter(name, default, descriptor).value)
+
+
+def _typed(name: str, default, value):
+    """An override rclpy could not type (``-p name:=[]``) comes back as None: refuse it with the expected form."""
+    if value is None and default is not None:
+        example = list(default) if isinstance(default, (list, tuple)) else default
+        raise ValueError(f"parameter {name}: needs a value like {example!r}, got an empty or untyped one")
+    return value
+
+
+def check_overrides(node) -> None:
+    """`ValueError` naming every ``-p name:=value`` the node did not declare (a typo is otherwise silently ignored)."""
+    known = set(node._parameters)  # noqa: SLF001 - rclpy keeps declared names and overrides only privately
+    unknown = sorted(set(node._parameter_overrides) - known)  # noqa: SLF001
+    if unknown:
+        raise ValueError(f"unknown parameter{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
+                         f"{node.get_name()} knows: {', '.join(sorted(known))}")
+
+
+def usage(name: str, node=None) -> str:
+    """The usage text of a node; with the node built, its parameters with description and range."""
+    lines = [f"usage: {name} [--ros-args -p name:=value ... | --params-file FILE]"]
+    if node is None:
+        return lines[0] + f"\n{name} takes no other arguments; `{name} --help` lists its parameters"
+    for param, descriptor in sorted(node._descriptors.items()):  # noqa: SLF001
+        ranges = [*descriptor.floating_point_range, *descriptor.integer_range]
+        limits = f" [{ranges[0].from_value:g}, {ranges[0].to_value:g}]" if ranges else ""
+        lines.append(f"  {param} = {node.get_parameter(param).value!r}{limits}: {descriptor.description}")
+    return "\n".join(lines)
+
+
+def init_checked(name: str, args: list[str] | None, **init_kwargs) -> int | None:
+    """rclpy.init with the command line checked: an exit code when the node must not start, else None."""
+    import rclpy
+
+    argv = sys.argv if args is None else args
+    try:
+        extra = non_ros_args(args)
+        if extra and extra[0] not in ("-h", "--help"):
+            print(f"{name}: unexpected argument {' '.join(extra)}\n{usage(name)}", file=sys.stderr)
+            return 2
+        rclpy.init(args=args if not extra else argv[:1], **init_kwargs)
+    except Exception as exc:  # noqa: BLE001 - rclpy's RCLError / RCLInvalidROSArgsError on a malformed --ros-args
+        reason = re.sub(r"^.*?: (?=Couldn't)|\. Error:.*$", "", str(exc).splitlines()[0])
+        print(f"{name}: bad --ros-args: {reason}", file=sys.stderr)
+        return 2
+    return None
 
 
 def run_node(name: str, factory: Callable[[], object], args: list[str] | None = None) -> int:
-    """rclpy.init, build the node, spin until Ctrl-C/SIGTERM, shut down; one-line errors on bad parameters."""
+    """rclpy.init, build the node, spin until SIGINT/SIGTERM, close it; one-line errors on bad arguments.
+
+    ``--help`` prints the node's parameters; any other non-ROS argument, a malformed or
+    unknown ``-p`` override, or a refused value is one line on stderr and exit code 2.
+    SIGINT/SIGTERM only set a flag that the spin loop checks, so the node finishes the
+    callback it is in, closes (its summary line) and exits 0; rclpy's own handlers would
+    invalidate the context under a running callback. A node with ``spin(stop)`` runs its
+    own loop until the ``threading.Event`` is set.
+    """
     import rclpy
     from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, ParameterException
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
-    rclpy.init(args=args)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    code = init_checked(name, args, signal_handler_options=SignalHandlerOptions.NO)
+    if code is not None:
+        return code
     try:
         node = factory()
+        check_overrides(node)
     except (InvalidParameterValueException, InvalidParameterTypeException, ParameterException, ValueError) as exc:
         print(f"{name}: invalid parameter: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
-    code = 0
+    if non_ros_args(args):  # --help: the node was built only to describe itself
+        print(usage(name, node))
+        _close(node)
+        return 0
     try:
         spin = getattr(node, "spin", None)
-        if spin is not None:
-            code = int(spin() or 0)
-        else:
-            rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        code = int(spin(stop) or 0) if spin is not None else _spin_until(node, stop)
     finally:
-        close = getattr(node, "close", None)
-        if close is not None:
-            close()
-        node.destroy_node()
-        rclpy.try_shutdown()
+        _close(node)
     return code
+
+
+def _spin_until(node, stop: threading.Event) -> int:
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    while not stop.is_set():
+        executor.spin_once(timeout_sec=0.1)
+    executor.remove_node(node)
+    return 0
+
+
+def non_ros_args(args: list[str] | None) -> list[str]:
+    """The command line without the program name and the ROS arguments (`RCLInvalidROSArgsError` if malformed)."""
+    from rclpy.utilities import remove_ros_args
+
+    return remove_ros_args(args=sys.argv if args is None else args)[1:]
+
+
+def _close(node, ack_budget_s: float = 2.0) -> None:
+    """Close the node (its summary line), let subscribers acknowledge what its reliable publishers sent
+    (a verdict published just before the stop must still reach the recorder), then destroy it."""
+    import time
+
+    import rclpy
+    from rclpy.duration import Duration
+    from rclpy.qos import ReliabilityPolicy
+
+    deadline = time.monotonic() + ack_budget_s
+    for publisher in node.publishers:
+        left = deadline - time.monotonic()
+        if left > 0 and publisher.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
+            publisher.wait_for_all_acked(Duration(seconds=left))
+    close = getattr(node, "close", None)
+    if close is not None:
+        close()
+    node.destroy_node()
+    rclpy.try_shutdown()

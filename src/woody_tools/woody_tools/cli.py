@@ -10,6 +10,7 @@ SUBCOMMANDS = [
     ("run", "line_run", "run a multi-lane line: sim + vision + gate + recorder; bag, verdicts.csv, report.md"),
     ("replay", "replay", "republish a recorded bag with its original timing and /clock"),
     ("report", "report_command", "rebuild report.md and plots from a bag or a verdicts.csv"),
+    ("bag", "bag_command", "`woody bag info BAG`, `woody bag recover IN OUT` (rescue a recording cut short)"),
     ("bench", "bench", "benchmarks: `woody bench sim`, `woody bench vision`, `woody bench graph`"),
     ("sweep", "sweep", "the paper's drop-test grid (meshes x k x speed), parallel and resumable; runs.csv, results.md"),
     ("calibrate", "calibrate", "fit M, c and the drive friction to the paper's side view, choose the Φ threshold; "

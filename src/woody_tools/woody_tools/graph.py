@@ -3,7 +3,8 @@
 `woody run` and the integration tests both start real entry points this way:
 each node is its own process, all share one ``ROS_DOMAIN_ID`` that no other
 run on this machine holds (a lock file per id), so parallel runs and tests
-never see each other's topics. A user's own ``ROS_DOMAIN_ID`` is respected.
+never see each other's topics. A user's own ``ROS_DOMAIN_ID`` is respected
+but locked the same way, so a second run on it is refused rather than mixed.
 """
 
 from __future__ import annotations
@@ -25,10 +26,14 @@ MAX_DOMAIN_ID = 232
 
 
 class DomainLease:
-    """A ROS domain id held exclusively by this process until `release()`."""
+    """A ROS domain id held exclusively by this process until `release()`.
 
-    def __init__(self, domain_id: int, lock_file: IO | None) -> None:
+    ``exported`` is True for the user's own ROS_DOMAIN_ID, which programs other than woody may share.
+    """
+
+    def __init__(self, domain_id: int, lock_file: IO | None, exported: bool = False) -> None:
         self.domain_id = domain_id
+        self.exported = exported
         self._lock_file = lock_file
 
     def release(self) -> None:
@@ -44,23 +49,42 @@ class DomainLease:
         self.release()
 
 
-def lease_domain(env: dict[str, str] | None = None) -> DomainLease:
-    """The user's ROS_DOMAIN_ID if set, else a free id locked for this process."""
+class DomainInUse(RuntimeError):
+    """The exported ROS_DOMAIN_ID is held by another woody run on this machine."""
+
+
+def _try_lock(lock_dir: Path, domain_id: int) -> IO | None:
+    handle = open(lock_dir / f"{domain_id}.lock", "w")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        return None
+    return handle
+
+
+def lease_domain(env: dict[str, str] | None = None, *, share: bool = False) -> DomainLease:
+    """The user's ROS_DOMAIN_ID if set (locked too: `DomainInUse` when another run holds it, unless
+    ``share``), else a free id locked for this process."""
     env = os.environ if env is None else env
-    if env.get("ROS_DOMAIN_ID"):
-        return DomainLease(int(env["ROS_DOMAIN_ID"]), None)
     lock_dir = Path(tempfile.gettempdir()) / "woody-domains"
     lock_dir.mkdir(exist_ok=True)
+    if env.get("ROS_DOMAIN_ID"):
+        if not env["ROS_DOMAIN_ID"].strip().isdigit() or int(env["ROS_DOMAIN_ID"]) > MAX_DOMAIN_ID:
+            raise ValueError(f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']!r} is not a domain id (0..{MAX_DOMAIN_ID})")
+        domain_id = int(env["ROS_DOMAIN_ID"])
+        handle = _try_lock(lock_dir, domain_id)
+        if handle is None and not share:
+            raise DomainInUse(f"ROS_DOMAIN_ID={domain_id} (exported) is in use by another woody run on this "
+                              "machine; the two would mix. Unset ROS_DOMAIN_ID to get a private domain, "
+                              "or pass --share-domain to mix on purpose")
+        return DomainLease(domain_id, handle, exported=True)
     candidates = list(range(1, MAX_DOMAIN_ID + 1))
     random.shuffle(candidates)
     for domain_id in candidates:
-        handle = open(lock_dir / f"{domain_id}.lock", "w")
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        return DomainLease(domain_id, handle)
+        handle = _try_lock(lock_dir, domain_id)
+        if handle is not None:
+            return DomainLease(domain_id, handle)
     raise RuntimeError(f"no free ROS domain id in 1..{MAX_DOMAIN_ID} (lock files in {lock_dir})")
 
 
@@ -75,24 +99,13 @@ def entry_point(name: str) -> str:
     return found
 
 
-def ros_args(params: dict[str, object]) -> list[str]:
-    """``--ros-args -p name:=value ...`` for a parameter dict."""
-    args = ["--ros-args"]
-    for key, value in params.items():
-        if isinstance(value, bool):
-            text = "true" if value else "false"
-        elif isinstance(value, (list, tuple)):
-            text = "[" + ",".join(_scalar(v) for v in value) + "]"
-        else:
-            text = _scalar(value)
-        args += ["-p", f"{key}:={text}"]
-    return args
+def write_params_file(path: Path, params: dict[str, object]) -> Path:
+    """A ROS 2 parameters file for every node of the process: values are YAML-quoted, so paths with
+    ``#``, ``: `` or spaces arrive unchanged (``-p name:=value`` on a command line would cut them)."""
+    import yaml
 
-
-def _scalar(value: object) -> str:
-    if isinstance(value, str):
-        return value if value else "''"
-    return repr(value) if isinstance(value, float) else str(value)
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": dict(params)}}, allow_unicode=True))
+    return path
 
 
 class NodeProcess:
@@ -116,9 +129,11 @@ class NodeProcess:
         child_env.setdefault("PYTHONUNBUFFERED", "1")
         cmd = [entry_point(name), *extra_args]
         if params:
-            cmd += ros_args(params)
+            params_file = write_params_file(self.log_path.with_suffix(".params.yaml"), params)
+            cmd += ["--ros-args", "--params-file", str(params_file)]
         self.command = cmd
         self._log = open(self.log_path, "w")
+        self._sent: set[int] = set()
         self.process = subprocess.Popen(
             cmd, stdout=self._log, stderr=subprocess.STDOUT, env=child_env, start_new_session=True
         )
@@ -133,13 +148,16 @@ class NodeProcess:
     def signal(self, sig: int) -> None:
         if self.alive():
             self.process.send_signal(sig)
+            self._sent.add(sig)
 
     def stop(self, timeout: float = 10.0) -> int:
-        """SIGINT, then SIGTERM, then SIGKILL; returns the exit code."""
+        """SIGINT (unless `signal` already sent it: a second one would cut the node's clean shutdown short),
+        then SIGTERM, then SIGKILL; returns the exit code."""
         for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 3.0)):
             if not self.alive():
                 break
-            self.process.send_signal(sig)
+            if sig not in self._sent:
+                self.signal(sig)
             try:
                 self.process.wait(wait)
             except subprocess.TimeoutExpired:

@@ -9,6 +9,9 @@ and leaves the bag, verdicts.csv and report.md in the output folder.
 from __future__ import annotations
 
 import argparse
+import fcntl
+import json
+import math
 import os
 import signal
 import sys
@@ -16,11 +19,11 @@ import time
 from datetime import datetime
 from pathlib import Path
 
+from woody_common.calibration import DEFAULT_PATH as CALIBRATION_PATH
+from woody_sim.line_geometry import SPEED_RANGE_FPM, TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
 from woody_tools.cpu_usage import CpuAccounting
-from woody_sim.line_geometry import TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
-from woody_tools.graph import NodeProcess, lease_domain, wait_for
+from woody_tools.graph import DomainInUse, NodeProcess, lease_domain
 from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
-
 
 MAX_LEAD_S = 0.1
 """line_sim runs at most this far (sim s, 3 top frames) ahead of the segmenter, whose queue holds 5 frames."""
@@ -44,18 +47,69 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m)")
+    parser.add_argument("--calibration", default=str(CALIBRATION_PATH),
+                        help="calibration file given to line_sim and the grader as a ROS params file "
+                             "(default config/calibration.yaml)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
+    parser.add_argument("--force", action="store_true", help="overwrite a run already in --out")
+    parser.add_argument("--share-domain", action="store_true",
+                        help="run on an exported ROS_DOMAIN_ID even when another woody run holds it (they mix)")
+
+
+class RunRefused(Exception):
+    """An input `woody run` cannot work with; the message is one line (printed, exit code 2)."""
 
 
 def _validate(args: argparse.Namespace) -> None:
+    low, high = SPEED_RANGE_FPM
     if not 1 <= args.lanes <= 6:
-        raise SystemExit(f"woody run: --lanes must be 1..6, got {args.lanes}")
-    if not 0 < args.speed_fpm <= 400:
-        raise SystemExit(f"woody run: --speed-fpm must be in (0, 400], got {args.speed_fpm}")
+        raise RunRefused(f"--lanes must be 1..6, got {args.lanes}")
+    if not low <= args.speed_fpm <= high:
+        raise RunRefused(f"--speed-fpm must be in [{low:g}, {high:g}], got {args.speed_fpm}")
     if args.fillets is not None and args.fillets < 1:
-        raise SystemExit(f"woody run: --fillets must be >= 1, got {args.fillets}")
-    if any(k < 0 for k in args.k):
-        raise SystemExit(f"woody run: --k values must be >= 0, got {args.k}")
+        raise RunRefused(f"--fillets must be >= 1, got {args.fillets}")
+    if not all(0 <= k < math.inf for k in args.k):
+        raise RunRefused(f"--k values must be finite and >= 0, got {' '.join(f'{k:g}' for k in args.k)}")
+
+
+def _claim_out(out: Path, force: bool):
+    """Create ``out`` and lock it for this run: one line when it is unwritable, in use, or holds a run already."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        lock = open(out / ".woody-run.lock", "w")
+    except OSError as exc:
+        raise RunRefused(f"--out {out}: cannot write there ({exc.strerror or exc})") from None
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.close()
+        raise RunRefused(f"--out {out} is in use by another woody run; choose another folder") from None
+    bag = out / "line.mcap"
+    if bag.exists() and not force:
+        lock.close()
+        raise RunRefused(f"--out {out} already holds a run ({bag.name}); pass --force to overwrite it "
+                         "or choose another folder")
+    bag.unlink(missing_ok=True)
+    return lock
+
+
+def _check_meshes(spec: str) -> list[str]:
+    """One line per mesh file of ``spec`` that line_sim would skip or convert, checked here so the terminal
+    and report.md name them (line_sim only logs them)."""
+    import warnings
+
+    from woody_sim.meshes import MeshWarning, load_mesh_set
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            meshes, errors = load_mesh_set(spec)
+        except ValueError as exc:
+            raise RunRefused(f"--meshes: {exc}") from None
+    if not meshes:
+        raise RunRefused(f"--meshes {spec}: no loadable mesh ({'; '.join(errors)})")
+    converted = [f"converted mesh {w.message}" for w in caught if issubclass(w.category, MeshWarning)]
+    return [f"skipped mesh {line}" for line in errors] + converted
 
 
 class LineMonitor:
@@ -65,11 +119,13 @@ class LineMonitor:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
         from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
 
+        self.domain_id = domain_id
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
+        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("woody_run_monitor", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -121,61 +177,112 @@ def verdict_from_msg(msg) -> Verdict:
     return Verdict(fillet_id=msg.fillet_id, lane=msg.lane, stamp=_seconds(msg.header.stamp),
                    classification=classes.get(msg.classification, "unscored"), grade=msg.grade, phi=msg.phi,
                    hu_term=msg.hu_term, solidity_term=msg.solidity_term, nmdm=msg.nmdm, mdm=msg.mdm, be=msg.be,
-                   reason=msg.unscored_reason)
+                   reason=msg.unscored_reason, threshold=msg.threshold)
+
+
+def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, object]:
+    """The run's settings as report.md's table shows them; the recorder keeps them in the bag (``woody.run``)."""
+    return {"lanes": args.lanes, "line speed (FPM)": args.speed_fpm,
+            "stiffness mix k": ", ".join(f"{k:g}" for k in args.k), "meshes": args.meshes, "seed": args.seed,
+            "fillets requested": fillets or f"{args.duration:g} s of spawning",
+            "threshold": "grader default" if args.threshold is None else args.threshold,
+            "side camera (Hz)": args.side_rate, "paced to wall clock": args.realtime}
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
+    try:
+        return _run_checked(args)
+    except RunRefused as exc:
+        print(f"woody run: {exc}", file=sys.stderr)
+        return 2
 
+
+def _run_checked(args: argparse.Namespace) -> int:
+    """Every input checked before anything is written: arguments, meshes, the domain, the output folder."""
     _validate(args)
     fillets = args.fillets if args.fillets is not None or args.duration is not None else 12
     out = Path(args.out) if args.out else Path("bags") / datetime.now().strftime("run-%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
-    logs = out / "logs"
-    bag = out / "line.mcap"
-    if bag.exists():
-        bag.unlink()
+    mesh_notes = _check_meshes(args.meshes)
+    try:
+        lease = lease_domain(share=args.share_domain)
+    except (DomainInUse, ValueError) as exc:
+        raise RunRefused(str(exc)) from None
+    monitor = None
+    try:
+        monitor = LineMonitor(lease.domain_id)
+        if lease.exported and not args.share_domain:
+            _refuse_foreign_nodes(monitor, lease.domain_id)
+        lock = _claim_out(out, args.force)
+        for line in mesh_notes:
+            print(f"woody run: {line}", file=sys.stderr, flush=True)
+        try:
+            return _run_line(args, fillets, out, monitor, mesh_notes)
+        finally:
+            lock.close()
+    finally:
+        if monitor is not None:
+            monitor.close()
+        lease.release()
 
-    lease = lease_domain()
-    print(f"woody run: ROS_DOMAIN_ID={lease.domain_id}, output {out}/", flush=True)
+
+def _refuse_foreign_nodes(monitor: LineMonitor, domain_id: int, seconds: float = 1.5) -> None:
+    """On an exported ROS_DOMAIN_ID other programs may already run: the line would mix with them."""
+    monitor.spin(seconds)  # time for discovery
+    foreign = sorted({f"{ns.rstrip('/')}/{name}" for name, ns in monitor.node.get_node_names_and_namespaces()
+                      if name != monitor.node.get_name()})
+    if foreign:
+        raise RunRefused(f"ROS_DOMAIN_ID={domain_id} (exported) already has nodes ({', '.join(foreign)}); the line "
+                         "would mix with them. Unset ROS_DOMAIN_ID to get a private domain, or pass --share-domain")
+
+
+def _start_nodes(args: argparse.Namespace, fillets: int | None, out: Path, domain_id: int) -> list[NodeProcess]:
+    """Recorder first (it must see every topic from the start), line_sim last (it waits for the vision nodes)."""
     sim_params: dict[str, object] = {
         "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
         "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
         "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
-        "max_lead_s": MAX_LEAD_S,
-        "top_camera": args.top_camera,
+        "max_lead_s": MAX_LEAD_S, "top_camera": args.top_camera,
     }
     camera_height = LineGeometry(**top_camera_preset(args.top_camera)).top_height
     vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes, "camera_height_m": camera_height}
     grader_params = dict(vision_params)
     if args.threshold is not None:
         grader_params["threshold"] = args.threshold
-
+    settings = json.dumps(run_settings(args, fillets))
     nodes: list[NodeProcess] = []
-    monitor = None
-    cpu = None
-    rows: list[dict] = []
-    stopping = {"signal": None}
+    for name, params in (("recorder", {"use_sim_time": True, "output": str(out / "line.mcap"),
+                                       "run_settings": settings}),
+                         ("segmenter", vision_params), ("grader", grader_params),
+                         ("reject_gate", {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm}),
+                         ("line_sim", sim_params)):
+        calibration = ("--ros-args", "--params-file", args.calibration) if name in ("line_sim", "grader") else ()
+        nodes.append(NodeProcess(name, params, domain_id=domain_id, log_dir=out / "logs", extra_args=calibration))
+    return nodes
 
-    def on_signal(signum, _frame):
-        stopping["signal"] = signum
 
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    error = None
+def _stop_nodes(nodes: list[NodeProcess]) -> None:
+    """SIGINT to every node at once (only once: a second one cuts a node's summary short), the recorder last."""
+    for node in nodes:
+        if node.name != "recorder":
+            node.signal(signal.SIGINT)
+    for node in nodes:
+        if node.name != "recorder":
+            node.stop(timeout=10.0)
+    for node in nodes:
+        if node.name == "recorder":
+            node.stop(timeout=30.0)
+
+
+def _watch(monitor: LineMonitor, nodes: list[NodeProcess], fillets: int | None, args: argparse.Namespace,
+           stopping: dict, cpu: CpuAccounting) -> str | None:
+    """Show progress until the line is done; the reason it stopped early, else None."""
+    from tqdm import tqdm
+
+    wall_start = time.monotonic()
+    bar = tqdm(total=fillets or None, unit="fillet", desc="graded", dynamic_ncols=True, mininterval=1.0,
+               file=sys.stderr, disable=None if sys.stderr.isatty() else True)
+    last_line, done_since = 0.0, None
     try:
-        start = lambda name, params: nodes.append(NodeProcess(name, params, domain_id=lease.domain_id, log_dir=logs))
-        start("recorder", {"use_sim_time": True, "output": str(bag)})
-        start("segmenter", vision_params)
-        start("grader", grader_params)
-        start("reject_gate", {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm})
-        start("line_sim", sim_params)
-        monitor = LineMonitor(lease.domain_id)
-        cpu = CpuAccounting({"woody run": os.getpid(), **{n.name: n.process.pid for n in nodes}})
-        wall_start = time.monotonic()
-        bar = tqdm(total=fillets or None, unit="fillet", desc="graded", dynamic_ncols=True, mininterval=1.0,
-                   file=sys.stderr, disable=None if sys.stderr.isatty() else True)
-        last_line = 0.0
-        done_since = None
         while True:
             monitor.spin(0.25)
             cpu.sample()
@@ -191,55 +298,65 @@ def run(args: argparse.Namespace) -> int:
             dead = [n for n in nodes if not n.alive()]
             if dead:
                 node = dead[0]
-                error = f"node '{node.name}' exited with code {node.returncode}; last lines of {node.log_path}:\n{node.log_tail()}"
-                break
+                return (f"node '{node.name}' exited with code {node.returncode}; last lines of {node.log_path}:\n"
+                        f"{node.log_tail()}")
             if stopping["signal"] is not None:
-                error = "interrupted"
-                break
+                return "interrupted"
             if elapsed > args.timeout:
-                error = f"timed out after {args.timeout:.0f} s of wall time"
-                break
+                return f"timed out after {args.timeout:.0f} s of wall time"
             if _finished(monitor, fillets, args):
                 done_since = done_since or time.monotonic()
                 if time.monotonic() - done_since > 1.0:
-                    break
+                    return None
+    finally:
         bar.close()
+
+
+def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, monitor: LineMonitor,
+              mesh_notes: list[str]) -> int:
+    print(f"woody run: ROS_DOMAIN_ID={monitor.domain_id}, output {out}/", flush=True)
+    nodes: list[NodeProcess] = []
+    cpu = None
+    stopping = {"signal": None}
+
+    def on_signal(signum, _frame):
+        stopping["signal"] = signum
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    error = None
+    try:
+        nodes = _start_nodes(args, fillets, out, monitor.domain_id)
+        cpu = CpuAccounting({"woody run": os.getpid(), **{n.name: n.process.pid for n in nodes}})
+        wall_start = time.monotonic()
+        error = _watch(monitor, nodes, fillets, args, stopping, cpu)
     finally:
         if cpu is not None:
             cpu.sample()
             wall = time.monotonic() - wall_start
-        for node in nodes:
-            if node.name != "recorder":
-                node.signal(signal.SIGINT)
-        for node in nodes:
-            if node.name != "recorder":
-                node.stop(timeout=10.0)
-        for node in nodes:
-            if node.name == "recorder":
-                node.stop(timeout=30.0)
-        if monitor is not None:
-            rows = join(monitor.spawns, monitor.verdicts)
-            monitor.close()
-        lease.release()
+        _stop_nodes(nodes)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-
-    if monitor is None:
-        print(f"woody run: {error or 'the line did not start'}", file=sys.stderr)
-        return 1
-    csv_path = write_csv(rows, out / "verdicts.csv")
-    info = {"lanes": args.lanes, "line speed (FPM)": args.speed_fpm, "stiffness mix k": ", ".join(f"{k:g}" for k in args.k),
-            "meshes": args.meshes, "seed": args.seed, "fillets spawned": len(monitor.spawns),
-            "verdicts": len(monitor.verdicts), "gate commands": monitor.gate_commands,
-            "sim time (s)": f"{monitor.sim_time:.1f}", "paced to wall clock": args.realtime}
-    report = build_report(rows, out, title="woody line run", run_info=info)
-    print(verdict_table(rows))
-    print(f"\nbag: {bag}\nverdicts: {csv_path}\nreport: {report}\nnode logs: {logs}/")
-    print(cpu.summary(wall))
+    _write_outputs(args, fillets, out, monitor, mesh_notes)
+    if cpu is not None:
+        print(cpu.summary(wall))
     if error:
         print(f"woody run: {error}", file=sys.stderr)
         return 1
     return 0
+
+
+def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, monitor: LineMonitor,
+                   mesh_notes: list[str]) -> None:
+    rows = join(monitor.spawns, monitor.verdicts)
+    csv_path = write_csv(rows, out / "verdicts.csv")
+    info = dict(run_settings(args, fillets))
+    info.update({"fillets spawned": len(monitor.spawns), "verdicts": len(monitor.verdicts),
+                 "gate commands": monitor.gate_commands, "sim time (s)": f"{monitor.sim_time:.1f}"})
+    report = build_report(rows, out, title="woody line run", run_info=info, notes=mesh_notes)
+    print(verdict_table(rows))
+    print(f"\nbag: {out / 'line.mcap'}\nverdicts: {csv_path}\nreport: {report}\nnode logs: {out / 'logs'}/")
+    for line in mesh_notes:
+        print(line)
 
 
 def _finished(monitor: LineMonitor, fillets: int | None, args: argparse.Namespace) -> bool:

@@ -52,6 +52,7 @@ __all__ = [
     "parse_qos_profiles",
     "qos_profiles_yaml",
     "read_bag",
+    "recover_bag",
 ]
 
 SEPARATOR = "=" * 80
@@ -345,14 +346,19 @@ class BagWriter:
         self.add_metadata("woody", info)
 
     # ------------------------------------------------------------------ topics and messages
-    def add_topic(self, topic: str, type_name: str, qos_profile_yaml: str = "") -> int:
-        """Register ``topic`` of ``type_name``; returns its channel id (idempotent per topic)."""
+    def add_topic(self, topic: str, type_name: str, qos_profile_yaml: str = "", definition: bytes | None = None) -> int:
+        """Register ``topic`` of ``type_name``; returns its channel id (idempotent per topic).
+
+        ``definition`` is the schema text to store (default: this installation's ``ros2msg``
+        text), so a recovered bag keeps the schemas it was recorded with.
+        """
         if topic in self._channels:
             return self._channels[topic]
         full = normalize_type(type_name)
         schema_id = self._schemas.get(full)
         if schema_id is None:
-            schema_id = self._writer.register_schema(full, "ros2msg", message_definition(full).encode())
+            text = definition if definition is not None else message_definition(full).encode()
+            schema_id = self._writer.register_schema(full, "ros2msg", text)
             self._schemas[full] = schema_id
         channel_id = self._writer.register_channel(
             topic=topic, message_encoding="cdr", schema_id=schema_id,
@@ -502,8 +508,8 @@ def read_bag(path: str | os.PathLike, topics: Iterable[str] | None = None) -> It
     A complete file is read through its summary in log-time order. A file without a
     summary (a killed recorder) is read as a stream in file order: everything readable
     is yielded, then `BagError` says ``"<path>: truncated after N messages at t=...s"``
-    (t from the first message). Missing file / not an MCAP: `BagError` at the first
-    ``next()``.
+    (N and t over every topic of the file, t from its first message). Missing file /
+    not an MCAP: `BagError` at the first ``next()``.
     """
     path, handle = _open(path)
     wanted = None if topics is None else set(topics)
@@ -532,13 +538,14 @@ def read_bag(path: str | os.PathLike, topics: Iterable[str] | None = None) -> It
             for record in _stream_records(handle):
                 if isinstance(record, Message):
                     channel = channels.get(record.channel_id)
-                    if channel is None or (wanted is not None and channel[0] not in wanted):
+                    if channel is None:
                         continue
                     if first is None:
                         first = record.log_time
                     last = record.log_time
-                    count += 1
-                    yield BagMessage(channel[0], channel[1], record.data, record.log_time)
+                    count += 1  # every topic: the truncation line says where the file ends, whatever was selected
+                    if wanted is None or channel[0] in wanted:
+                        yield BagMessage(channel[0], channel[1], record.data, record.log_time)
                 elif isinstance(record, Schema):
                     schemas[record.id] = record.name
                 elif isinstance(record, Channel):
@@ -625,3 +632,70 @@ def _schema_text(schema: Schema | None) -> str:
 def bag_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
     """The bag's metadata records, e.g. ``{"woody": {...run info...}}``."""
     return bag_summary(path)["metadata"]
+
+
+def recover_bag(source: str | os.PathLike, target: str | os.PathLike, *, overwrite: bool = False) -> dict[str, Any]:
+    """Rewrite every complete chunk of ``source`` (e.g. a SIGKILLed recording) into a valid, indexed ``target``.
+
+    Schemas, channels (with their QoS metadata), messages and metadata records are copied
+    in file order; the ``woody.recover`` metadata record says what was recovered and where
+    the source ended. Returns ``{"messages", "topics", "error"}`` (``error`` is the
+    truncation line of the source, ``None`` when it was complete). `BagError` (one line)
+    when the source is unreadable from the start or the target cannot be written.
+    """
+    path, handle = _open(source)
+    if Path(target).resolve() == path.resolve():
+        handle.close()
+        raise BagError(f"{target}: the output must differ from the input")
+    state: dict[str, Any] = {"writer": None, "metadata": {}, "schemas": {}, "channels": {}, "count": 0,
+                             "first": None, "last": None}
+    error = None
+    try:
+        handle.seek(0)
+        try:
+            for record in _stream_records(handle):
+                _copy_record(record, state, target, overwrite)
+        except _Truncated:
+            error = f"{path}: truncated after {state['count']} messages at {_seconds(state['first'], state['last'])}"
+        writer = state["writer"] or _recovery_writer(target, state, overwrite)
+        writer.add_metadata("woody.recover", {"source": str(path), "messages": str(state["count"]),
+                                              "source_end": error or "complete"})
+        writer.close()
+    finally:
+        handle.close()
+    return {"messages": state["count"], "topics": dict(writer.counts), "error": error}
+
+
+def _recovery_writer(target: str | os.PathLike, state: dict[str, Any], overwrite: bool) -> BagWriter:
+    """The target's writer, created once the source's leading metadata records are known."""
+    metadata = state["metadata"]
+    writer = BagWriter(target, metadata=metadata.pop("woody", None), overwrite=overwrite)
+    for name, data in metadata.items():
+        writer.add_metadata(name, data)
+    state["writer"] = writer
+    return writer
+
+
+def _copy_record(record: Any, state: dict[str, Any], target: str | os.PathLike, overwrite: bool) -> None:
+    """Copy one data-section record of a bag being recovered into the target."""
+    if isinstance(record, Metadata):
+        if state["writer"] is None:
+            state["metadata"][record.name] = dict(record.metadata)
+        else:
+            state["writer"].add_metadata(record.name, dict(record.metadata))
+        return
+    writer = state["writer"] or _recovery_writer(target, state, overwrite)
+    if isinstance(record, Schema):
+        state["schemas"][record.id] = record
+    elif isinstance(record, Channel):
+        schema = state["schemas"].get(record.schema_id)
+        if schema is not None:
+            writer.add_topic(record.topic, schema.name, record.metadata.get("offered_qos_profiles", ""),
+                             definition=schema.data)
+            state["channels"][record.id] = record.topic
+    elif isinstance(record, Message) and record.channel_id in state["channels"]:
+        writer.write(state["channels"][record.channel_id], record.data, record.log_time, record.publish_time,
+                     record.sequence)
+        state["first"] = record.log_time if state["first"] is None else state["first"]
+        state["last"] = record.log_time
+        state["count"] += 1

@@ -18,6 +18,11 @@ Parameters (``--ros-args -p name:=value``):
   longest a message waits in memory before its chunk is written; what a
   SIGKILL can lose), ``max_buffer_mb`` (512: received but unwritten data; a
   full buffer holds the subscriptions back rather than grow).
+- ``run_settings`` (string): a JSON object of the recorded run's settings, kept in
+  the bag's ``woody`` metadata record (`woody report BAG` rebuilds its table from it).
+
+Unknown parameter names, malformed overrides and other arguments are refused
+with one line (exit code 2); ``--help`` prints this list.
 
 Timing: the MCAP ``log_time`` of a message is the **system (wall) clock at
 reception** (the middleware's reception timestamp, ns since the Unix epoch),
@@ -38,7 +43,9 @@ keep-last ``queue_depth``. The offered profiles are stored in the channel's
 Per message, the subscription callback only queues the serialized bytes; a
 writer thread builds, compresses (zstd releases the GIL) and writes chunks, so
 compression and disk I/O use the second core. SIGINT/SIGTERM finish the file
-(summary and indexes) and log one line of counts per topic; exit code 0. A bad
+(summary and indexes) and log one line: messages, MB on disk (compressed), and per
+topic written/published (``/?`` when several publishers share it), naming what was
+lost in transport; exit code 0. A bad
 parameter or an unwritable output: one error line, exit code 2.
 """
 
@@ -61,6 +68,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from woody_sim.ros_params import check_overrides, init_checked, non_ros_args, usage
 from woody_tools.mcap_io import BagError, BagWriter, message_class, message_definition, qos_profiles_yaml
 
 DEFAULT_EXCLUDE = r"^/(rosout|parameter_events)$|/_"
@@ -81,7 +89,8 @@ class Recorder(Node):
         super().__init__("recorder")
         try:
             self._declare()
-        except (ParameterException, InvalidParameterTypeException) as exc:
+            check_overrides(self)
+        except (ParameterException, InvalidParameterTypeException, ValueError) as exc:
             raise ConfigError(f"bad parameter: {exc}") from None
         p = self.get_parameter
         output = p("output").value or f"bags/{time.strftime('%Y%m%d-%H%M%S')}.mcap"
@@ -103,6 +112,7 @@ class Recorder(Node):
             "use_sim_time": bool(p("use_sim_time").value), "start_unix_ns": time.time_ns(),
             "log_time": "system (wall) clock at reception, ns since the Unix epoch",
             "publish_time": "publisher's source timestamp (wall clock)",
+            "run_settings": p("run_settings").value,
         }
         try:
             self._writer = BagWriter(output, chunk_size=int(p("chunk_size").value),
@@ -119,6 +129,7 @@ class Recorder(Node):
         self._error: BaseException | None = None
         self._subscriptions_by_topic: dict[str, object] = {}
         self._offered: dict[str, int] = {}
+        self._seen: dict[str, list] = {}  # topic -> [first publication seq, last, received, most publishers]
         self._ignored: set[str] = set()
         self._start = time.monotonic()
         self._thread = threading.Thread(target=self._write_loop, name="mcap-writer", daemon=True)
@@ -151,6 +162,9 @@ class Recorder(Node):
         self.declare_parameter("flush_period", 1.0, desc("max seconds a message waits before its chunk is "
                                                          "written (what a SIGKILL can lose)", D))
         self.declare_parameter("max_buffer_mb", 512, desc("received but unwritten data held in memory", I))
+        self.declare_parameter("run_settings", "", desc("JSON object of the recorded run's settings, kept in the "
+                                                        "bag's woody metadata record (woody report rebuilds its "
+                                                        "settings table from it)", S))
 
     def _compile(self, name: str, pattern: str) -> re.Pattern | None:
         if not pattern:
@@ -208,8 +222,14 @@ class Recorder(Node):
         qos = self._qos(publishers)
         self._enqueue((topic, None, type_name, qos_profiles_yaml(p.qos_profile for p in publishers)), 0)
         enqueue, time_ns = self._enqueue, time.time_ns
+        seen = self._seen[topic] = [None, 0, 0, len(publishers)]
 
         def on_message(data: bytes, info: dict) -> None:
+            sequence = info.get("publication_sequence_number")
+            if sequence:
+                seen[0] = sequence if seen[0] is None else min(seen[0], sequence)
+                seen[1] = max(seen[1], sequence)
+            seen[2] += 1
             enqueue((topic, data, info["received_timestamp"] or time_ns(), info["source_timestamp"]), len(data))
 
         self._subscriptions_by_topic[topic] = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
@@ -223,6 +243,7 @@ class Recorder(Node):
             self._offered[topic] = count
             return
         self._offered[topic] = count
+        self._seen[topic][3] = max(self._seen[topic][3], count)
         sub_qos = self._subscriptions_by_topic[topic].qos_profile
         for pub in self.get_publishers_info_by_topic(topic):
             offered = pub.qos_profile
@@ -274,8 +295,30 @@ class Recorder(Node):
             with self._cond:
                 self._cond.notify_all()
 
+    def drain(self, executor, quiet_s: float = 0.3, limit_s: float = 5.0) -> None:
+        """Take what the middleware still holds for us before closing: a recorder lagging behind a busy
+        graph must not drop the last messages (e.g. the final verdict) because the stop signal came first."""
+        deadline = time.monotonic() + limit_s
+        last, quiet_since = -1, time.monotonic()
+        while time.monotonic() < deadline and time.monotonic() - quiet_since < quiet_s:
+            executor.spin_once(timeout_sec=0.05)
+            received = sum(seen[2] for seen in self._seen.values())
+            if received != last:
+                last, quiet_since = received, time.monotonic()
+
+    def drops(self) -> dict[str, tuple[int, int | None]]:
+        """Per topic (written, published while subscribed): the publisher's sequence numbers count what it
+        sent, so a gap is a message lost in transport. ``None`` when several publishers share the topic
+        (their sequence numbers interleave) or the middleware gives none."""
+        result = {}
+        for topic, (first, last, _received, publishers) in sorted(self._seen.items()):
+            published = None if first is None or publishers > 1 else last - first + 1
+            result[topic] = (self._writer.counts.get(topic, 0), published)
+        return result
+
+
     def close(self) -> int:
-        """Drain the queue, finish the file, log the counts; 0 if the bag is complete, else 1."""
+        """Drain the queue, finish the file, log one summary line; 0 if the bag is complete, else 1."""
         with self._cond:
             self._stopping = True
             self._cond.notify_all()
@@ -285,22 +328,32 @@ class Recorder(Node):
             self.get_logger().error(f"writing {self.output} failed: {self._error}")
             code = 1
         duration = time.monotonic() - self._start
-        counts = self._writer.counts
+        counts, drops = self._writer.counts, self.drops()
         total = sum(counts.values())
         try:
             self._writer.add_metadata("woody.recorder", {
                 "duration_s": f"{duration:.3f}", "messages": str(total),
-                "counts": ",".join(f"{t}={n}" for t, n in sorted(counts.items()))})
+                "counts": ",".join(f"{t}={n}" for t, n in sorted(counts.items())),
+                "written/published": ",".join(f"{t}={_drop_text(*d)}" for t, d in drops.items())})
             self._writer.close()
+            size = self.output.stat().st_size
         except Exception as exc:  # noqa: BLE001
             self.get_logger().error(f"finishing {self.output} failed: {exc}")
             return 1
         missing = sorted(self._topics - set(counts))
-        per_topic = ", ".join(f"{t} {n}" for t, n in sorted(counts.items())) or "nothing"
+        lost = sum(max(0, p - w) for w, p in drops.values() if p is not None)
         self.get_logger().info(
-            f"wrote {self.output}: {total} messages, {self._writer.bytes_written / 1e6:.1f} MB in {duration:.1f} s "
-            f"({per_topic})" + (f"; never seen: {', '.join(missing)}" if missing else ""))
+            f"wrote {self.output}: {total} messages, {size / 1e6:.1f} MB on disk in {duration:.1f} s, "
+            f"{lost} lost in transport; written/published per topic: "
+            + (", ".join(f"{t} {_drop_text(*d)}" for t, d in drops.items()) or "nothing")
+            + (f"; never seen: {', '.join(missing)}" if missing else ""))
         return code
+
+
+def _drop_text(written: int, published: int | None) -> str:
+    if published is None:
+        return f"{written}/?"
+    return f"{written}/{published}" + (f" (lost {published - written})" if published > written else "")
 
 
 def main(args: list[str] | None = None) -> int:
@@ -310,7 +363,13 @@ def main(args: list[str] | None = None) -> int:
         signal.signal(sig, lambda *_: stop.set())
     # rclpy's own handlers would shut the context down before the bag is finished
     # (and could interrupt finishing with KeyboardInterrupt); ours only set `stop`.
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    code = init_checked("recorder", args, signal_handler_options=SignalHandlerOptions.NO)
+    if code is not None:
+        return code
+    if non_ros_args(args):  # --help
+        print(usage("recorder").splitlines()[0] + "\n" + __doc__.split("\n\n", 1)[1].split("\n\nTiming")[0])
+        rclpy.try_shutdown()
+        return 0
     node: Recorder | None = None
     code = 0
     try:
@@ -319,6 +378,7 @@ def main(args: list[str] | None = None) -> int:
         executor.add_node(node)
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
+        node.drain(executor)
     except ConfigError as exc:
         rclpy.logging.get_logger("recorder").error(str(exc))
         code = 2

@@ -18,6 +18,7 @@ from woody_sim.line_geometry import FPM_TO_MPS
 VERDICT_COLUMNS = [
     "fillet_id", "lane", "mesh", "k", "speed_fpm", "phi", "hu_term", "solidity_term",
     "nmdm", "mdm", "be", "verdict", "grade", "truth", "sim_id", "mass", "spawn_time", "verdict_time", "reason",
+    "threshold",
 ]
 """Columns of verdicts.csv: the issue's twelve first, then what an analyst needs to audit a row."""
 
@@ -60,6 +61,7 @@ class Verdict:
     mdm: float
     be: float
     reason: str = ""
+    threshold: float = float("nan")
 
 
 def truth_of(k: float, woody_k: float) -> str:
@@ -95,12 +97,13 @@ def _row(spawn: Spawn | None, verdict: Verdict | None, woody_k: float) -> dict:
                    speed_fpm=round(spawn.line_speed / FPM_TO_MPS, 3), spawn_time=round(spawn.stamp, 4),
                    truth=truth_of(spawn.k, woody_k))
     if verdict is None:
-        row.update(fillet_id="", phi=nan, hu_term=nan, solidity_term=nan, nmdm=nan, mdm=nan, be=nan,
+        row.update(fillet_id="", phi=nan, hu_term=nan, solidity_term=nan, nmdm=nan, mdm=nan, be=nan, threshold=nan,
                    verdict="missing", reason="no verdict was published for this fillet")
         return row
     row.update(fillet_id=verdict.fillet_id, lane=verdict.lane, phi=verdict.phi, hu_term=verdict.hu_term,
                solidity_term=verdict.solidity_term, nmdm=verdict.nmdm, mdm=verdict.mdm, be=verdict.be,
                verdict=verdict.classification, grade=verdict.grade, verdict_time=round(verdict.stamp, 4),
+               threshold=verdict.threshold,
                reason=verdict.reason if verdict.reason else ("" if spawn else "no spawned fillet matches"))
     return row
 
@@ -125,7 +128,7 @@ def _fmt(value: object) -> object:
 def read_csv(path: Path) -> list[dict]:
     """Rows of a verdicts.csv, numbers parsed back (empty cells → NaN)."""
     numeric = {"k", "speed_fpm", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be", "mass",
-               "spawn_time", "verdict_time"}
+               "spawn_time", "verdict_time", "threshold"}
     with Path(path).open(newline="") as handle:
         reader = csv.DictReader(handle)
         missing = {"fillet_id", "lane", "k", "phi", "verdict"} - set(reader.fieldnames or [])
@@ -148,16 +151,24 @@ class Accuracy:
     unscored: int
     missing: int
     confusion: dict[tuple[str, str], int]
+    line_correct: int = 0
 
     @property
     def accuracy(self) -> float:
+        """Over the scored fillets only."""
         return self.correct / self.scored if self.scored else float("nan")
+
+    @property
+    def line_accuracy(self) -> float:
+        """Over every fillet on the line: one without a normal/woody verdict is not diverted, i.e. passes as normal."""
+        total = self.scored + self.unscored + self.missing
+        return self.line_correct / total if total else float("nan")
 
 
 def accuracy(rows: Sequence[dict]) -> Accuracy:
-    """Accuracy of normal/woody verdicts against ground truth over the scored fillets."""
+    """Accuracy of normal/woody verdicts against ground truth, over the scored fillets and over the whole line."""
     confusion = {(t, p): 0 for t in ("normal", "woody") for p in ("normal", "woody")}
-    scored = correct = unscored = missing = 0
+    scored = correct = unscored = missing = line_correct = 0
     for row in rows:
         if not row.get("truth"):
             continue
@@ -169,7 +180,23 @@ def accuracy(rows: Sequence[dict]) -> Accuracy:
             scored += 1
             correct += row["verdict"] == row["truth"]
             confusion[(row["truth"], row["verdict"])] += 1
-    return Accuracy(scored, correct, unscored, missing, confusion)
+        line_correct += (row["verdict"] == "woody") == (row["truth"] == "woody")
+    return Accuracy(scored, correct, unscored, missing, confusion, line_correct)
+
+
+def accuracy_title(acc: Accuracy) -> str:
+    """Both accuracies, so an unscored woody fillet (not diverted) never hides behind a scored 100 %."""
+    if not acc.scored and not (acc.unscored + acc.missing):
+        return "no fillets with ground truth"
+    scored = f"{acc.accuracy:.1%}" if acc.scored else "n/a"
+    return f"line accuracy {acc.line_accuracy:.1%}, scored {scored}"
+
+
+def report_threshold(rows: Sequence[dict], run_info: dict | None) -> float | None:
+    """The Φ threshold the grader used (from its verdicts), else the one in the run settings."""
+    used = sorted({r["threshold"] for r in rows if isinstance(r.get("threshold"), float)
+                   and not math.isnan(r["threshold"])})
+    return used[0] if used else _first_float(run_info, "threshold")
 
 
 def verdict_table(rows: Sequence[dict], limit: int = 40) -> str:
@@ -190,21 +217,42 @@ def verdict_table(rows: Sequence[dict], limit: int = 40) -> str:
 
 
 def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody line run",
-                 run_info: dict | None = None) -> Path:
-    """Write report.md and its PNG plots into ``out_dir``; returns the report path."""
+                 run_info: dict | None = None, notes: Sequence[str] = ()) -> Path:
+    """Write report.md and its PNG plots into ``out_dir``; returns the report path.
+
+    ``notes`` (mesh files skipped or converted, where a truncated bag ends) are listed at the
+    top, so nothing left out of the figures goes unsaid.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     acc = accuracy(rows)
     scored = [r for r in rows if r["verdict"] in ("normal", "woody") and r.get("k") != ""]
-    ks = sorted({float(r["k"]) for r in scored})
-    lanes = sorted({int(r["lane"]) for r in scored})
+    _plot_phi(scored, report_threshold(rows, run_info), out_dir / "phi_by_k_lane.png")
+    side = [r for r in scored if isinstance(r.get("nmdm"), float) and not math.isnan(r["nmdm"])]
+    _plot_nmdm(side, out_dir / "nmdm_by_k.png")
+    _plot_confusion(acc, out_dir / "confusion.png")
+    lines = [f"# {title}", ""]
+    if run_info:
+        lines += ["| setting | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in run_info.items()] + [""]
+    lines += [f"- {note}" for note in notes] + ([""] if notes else [])
+    lines += _markdown_body(rows, scored, side, acc)
+    path = out_dir / "report.md"
+    path.write_text("\n".join(lines))
+    return path
 
+
+def _groups(rows: Sequence[dict]) -> tuple[list[float], list[int]]:
+    return sorted({float(r["k"]) for r in rows}), sorted({int(r["lane"]) for r in rows})
+
+
+def _plot_phi(scored: Sequence[dict], threshold: float | None, path: Path) -> None:
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    ks, lanes = _groups(scored)
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     width = 0.8 / max(len(lanes), 1)
     for j, lane in enumerate(lanes):
@@ -214,19 +262,23 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
             ax.scatter(np.full(len(values), x), values, s=14, color=f"C{j}", label=f"lane {lane}" if i == 0 else None)
             if values:
                 ax.hlines(np.mean(values), x - width / 2, x + width / 2, color=f"C{j}")
-    threshold = _first_float(run_info, "threshold")
     if threshold is not None:
-        ax.axhline(threshold, color="k", ls="--", lw=0.8, label=f"threshold {threshold:g}")
+        ax.axhline(threshold, color="k", ls="--", lw=0.8, label=f"threshold {threshold:g} (below: woody)")
     ax.set_xticks(range(len(ks)), [f"k={k:g}" for k in ks])
     ax.set_ylabel("shape score Φ")
     ax.set_title("Φ per stiffness and lane")
-    if lanes:
+    if lanes or threshold is not None:
         ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out_dir / "phi_by_k_lane.png", dpi=110)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
-    side = [r for r in scored if isinstance(r.get("nmdm"), float) and not math.isnan(r["nmdm"])]
+
+def _plot_nmdm(side: Sequence[dict], path: Path) -> None:
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    ks, _ = _groups(side)
     fig, ax = plt.subplots(figsize=(5.0, 3.6))
     for i, k in enumerate(ks):
         values = [r["nmdm"] for r in side if float(r["k"]) == k]
@@ -237,10 +289,15 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
     ax.set_ylabel("NMDM (side view)")
     ax.set_title("NMDM per stiffness (watched lane)")
     fig.tight_layout()
-    fig.savefig(out_dir / "nmdm_by_k.png", dpi=110)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(3.8, 3.4))
+
+def _plot_confusion(acc: Accuracy, path: Path) -> None:
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(4.2, 3.6))
     labels = ["normal", "woody"]
     matrix = np.array([[acc.confusion[(t, p)] for p in labels] for t in labels])
     ax.imshow(matrix, cmap="Blues")
@@ -248,18 +305,21 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
         ax.text(j, i, str(value), ha="center", va="center", fontsize=14)
     ax.set_xticks([0, 1], labels)
     ax.set_yticks([0, 1], labels)
-    ax.set_xlabel("verdict")
+    ax.set_xlabel(f"verdict (+{acc.unscored + acc.missing} unscored, not shown)" if acc.unscored + acc.missing
+                  else "verdict")
     ax.set_ylabel("ground truth")
-    ax.set_title(f"accuracy {acc.accuracy:.1%}" if acc.scored else "no scored fillets")
+    ax.set_title(accuracy_title(acc), fontsize=9)
     fig.tight_layout()
-    fig.savefig(out_dir / "confusion.png", dpi=110)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
-    lines = [f"# {title}", ""]
-    if run_info:
-        lines += ["| setting | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in run_info.items()] + [""]
-    lines += [
+
+def _markdown_body(rows: Sequence[dict], scored: Sequence[dict], side: Sequence[dict], acc: Accuracy) -> list[str]:
+    ks, lanes = _groups(scored)
+    line = f"**{acc.line_accuracy:.1%}**" if acc.scored + acc.unscored + acc.missing else "n/a"
+    lines = [
         "## Accuracy against ground truth", "",
+        f"- line accuracy (every fillet; one without a verdict is not diverted): {line}",
         f"- scored fillets: {acc.scored}, correct: {acc.correct}, accuracy: "
         + (f"**{acc.accuracy:.1%}**" if acc.scored else "n/a"),
         f"- unscored (window never closed cleanly): {acc.unscored}; no verdict at all: {acc.missing}", "",
@@ -276,15 +336,12 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
                              f"{_mean_sd([r['solidity_term'] for r in group], 4)} |")
     lines += ["", "![phi](phi_by_k_lane.png)", "", "## Side view (watched lane)", "",
               "| k | n | NMDM | MDM (px) | BE |", "|---|---|---|---|---|"]
-    for k in ks:
+    for k in _groups(side)[0]:
         group = [r for r in side if float(r["k"]) == k]
-        if group:
-            lines.append(f"| {k:g} | {len(group)} | {_mean_sd([r['nmdm'] for r in group], 3)} | "
-                         f"{_mean_sd([r['mdm'] for r in group], 1)} | {_mean_sd([r['be'] for r in group], 1)} |")
+        lines.append(f"| {k:g} | {len(group)} | {_mean_sd([r['nmdm'] for r in group], 3)} | "
+                     f"{_mean_sd([r['mdm'] for r in group], 1)} | {_mean_sd([r['be'] for r in group], 1)} |")
     lines += ["", "![nmdm](nmdm_by_k.png)", "", "## Verdicts", "", "```", verdict_table(rows, limit=200), "```", ""]
-    path = out_dir / "report.md"
-    path.write_text("\n".join(lines))
-    return path
+    return lines
 
 
 def _first_float(info: dict | None, key: str) -> float | None:

@@ -16,7 +16,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from woody_msgs.msg import FilletVerdict, GateCommand
 
-from woody_sim.line_geometry import FPM_TO_MPS
+from woody_sim.line_geometry import FPM_TO_MPS, SPEED_RANGE_FPM
 from woody_sim.ros_params import declare, run_node
 from woody_vision.gate_timing import GateTiming
 
@@ -28,7 +28,7 @@ class RejectGate(Node):
     def __init__(self) -> None:
         super().__init__("reject_gate")
         speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
-                            "commercial speeds).", 1.0, 400.0)
+                            "commercial speeds).", *SPEED_RANGE_FPM)
         lanes = declare(self, "lanes", 3, "Number of lanes, each with its own diverter.", 1, 6)
         distances = list(declare(self, "gate_distance_m", [0.6], "Distance from the roller edge to each lane's "
                                  "diverter (m): one value for all lanes or one per lane."))

@@ -55,6 +55,7 @@ class Segmenter(Node):
 
         sensor = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE)
         self.tracks_pub = self.create_publisher(FilletTrackArray, "/vision/tracks", QoSProfile(depth=50))
+        self.frames = 0
         self.debug_pub = self.create_publisher(Image, "/vision/debug_image", 5) if self.publish_debug else None
         self.create_subscription(CameraInfo, "/top_camera/depth/camera_info", self.on_camera_info, sensor)
         self.create_subscription(Image, "/top_camera/depth/image_raw", self.on_depth, sensor)
@@ -83,6 +84,7 @@ class Segmenter(Node):
             self.scores.pop(next(iter(self.scores)))
 
     def on_depth(self, msg: Image) -> None:
+        self.frames += 1
         try:
             depth = image_to_array(msg, "32FC1")
             self.checker.check(msg, depth.shape)
@@ -132,6 +134,9 @@ class Segmenter(Node):
                     step=canvas.shape[1] * 3)
         out.data = canvas.tobytes()
         self.debug_pub.publish(out)
+
+    def close(self) -> None:
+        print(f"[segmenter] {self.frames} depth frames received, {self.checker.rejected} rejected", flush=True)
 
 
 def main(args: list[str] | None = None) -> None:
