@@ -22,7 +22,9 @@ from woody_msgs.msg import FilletTrackArray, FilletVerdict
 
 from woody_sim.ros_params import declare, run_node
 from woody_vision.camera_model import edge_row
-from woody_vision.frame_checks import FrameChecker, FrameError, image_to_array
+from woody_vision.frame_checks import FrameChecker, FrameError
+from woody_vision.image_encodings import color_rgb
+from woody_vision.image_qos import declare_image_qos
 from woody_vision.grader_core import FilletGrader, GradedFillet, TrackObservation
 from woody_vision.grading import DEFAULT_PHI_THRESHOLD, GradingRules
 from woody_vision.side_view import SidePassageTracker
@@ -69,7 +71,7 @@ class Grader(Node):
         self.published = 0
 
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        sensor = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        sensor = declare_image_qos(self)
         self.verdict_pub = self.create_publisher(FilletVerdict, "/grading/verdicts", reliable)
         self.create_subscription(CameraInfo, "/top_camera/depth/camera_info", self.on_camera_info, sensor)
         self.create_subscription(FilletTrackArray, "/vision/tracks", self.on_tracks, QoSProfile(depth=50))
@@ -97,7 +99,7 @@ class Grader(Node):
 
     def on_side_image(self, msg: Image) -> None:
         try:
-            rgb = image_to_array(msg, "rgb8")
+            rgb = color_rgb(msg)
             self.side_checker.check(msg, rgb.shape)
         except FrameError as exc:
             self.side_checker.reject(f"side camera: {exc}")

@@ -69,7 +69,7 @@ class SegmentationParams:
 class BackgroundModel:
     """Empty-belt depth, the per-pixel median of the first ``frames_needed`` frames fed to it.
 
-    Non-finite depths (no return) are ignored in the median; a pixel never seen
+    Non-finite and non-positive depths (no return) are ignored in the median; a pixel never seen
     stays NaN and therefore never rises above the belt in :func:`height_map`.
     Call :meth:`reset` to relearn, e.g. after the camera or belt moved.
     """
@@ -100,7 +100,8 @@ class BackgroundModel:
         frame = np.asarray(depth, dtype=np.float32)
         if self._frames and frame.shape != self._frames[0].shape:
             raise ValueError(f"depth shape changed from {self._frames[0].shape} to {frame.shape}")
-        frame = np.where(np.isfinite(frame), frame, np.float32(np.nan))
+        with np.errstate(invalid="ignore"):
+            frame = np.where(np.isfinite(frame) & (frame > 0.0), frame, np.float32(np.nan))
         self._frames.append(frame)
         if len(self._frames) >= self.frames_needed:
             with warnings.catch_warnings():
@@ -116,9 +117,10 @@ class BackgroundModel:
 
 
 def height_map(depth: np.ndarray, background: np.ndarray) -> np.ndarray:
-    """Height above the learned background in metres (float32); NaN/inf anywhere becomes 0."""
+    """Height above the learned background in metres (float32); NaN/inf anywhere or depth <= 0 (no return) become 0."""
     height = np.subtract(background, depth, dtype=np.float32)
-    height[~np.isfinite(height)] = 0.0
+    with np.errstate(invalid="ignore"):
+        height[~np.isfinite(height) | ~(np.asarray(depth) > 0.0)] = 0.0
     return height
 
 
