@@ -38,27 +38,40 @@ def test_sample_bag_opens_with_rosbags_and_mcap():
     assert len(verdicts) == len(recorded_verdicts()) == 3
 
 
-def replay_into_vision(bag, topics, ros_node, ros_domain, tmp_path, segmenter_params=None) -> tuple[list, str]:
-    """Replay ``topics`` of ``bag`` into a segmenter and a grader; the verdicts received and the processes' logs."""
+def replay_into_vision(bag, topics, ros_node, ros_domain, tmp_path, segmenter_params=None,
+                       lines: dict[str, dict] | None = None) -> tuple[dict[str, list], str]:
+    """Replay ``topics`` of ``bag`` into a segmenter and a grader per line (namespace: grader parameters).
+
+    Returns the verdicts received per namespace and the processes' logs.
+    """
     from woody_msgs.msg import FilletVerdict
 
-    received: list = []
-    ros_node.create_subscription(FilletVerdict, "/grading/verdicts", received.append,
-                                 QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+    lines = {"": {}} if lines is None else lines
+    received: dict[str, list] = {ns: [] for ns in lines}
     vision = {"use_sim_time": True, "lanes": 3}
-    nodes = [NodeProcess("segmenter", {**vision, **(segmenter_params or {})}, domain_id=ros_domain, log_dir=tmp_path),
-             NodeProcess("grader", vision, domain_id=ros_domain, log_dir=tmp_path)]
-    replay = NodeProcess("woody", None, domain_id=ros_domain, log_dir=tmp_path,
-                         extra_args=["replay", str(bag), "--topics", *topics])
+    processes = []
+    for ns, grader_params in lines.items():
+        ros_node.create_subscription(FilletVerdict, f"{ns}/grading/verdicts", received[ns].append,
+                                     QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+        log_dir = tmp_path / (ns.strip("/") or "root")
+        processes += [NodeProcess("segmenter", {**vision, **(segmenter_params or {})}, domain_id=ros_domain,
+                                  log_dir=log_dir, namespace=ns),
+                      NodeProcess("grader", {**vision, **grader_params}, domain_id=ros_domain, log_dir=log_dir,
+                                  namespace=ns)]
+    replays = [NodeProcess("woody", None, domain_id=ros_domain, log_dir=tmp_path / f"replay{i}",
+                           extra_args=["replay", str(bag), "--topics", *topics, "--namespace", ns])
+               for i, ns in enumerate(lines)]
+    expected = len(recorded_verdicts())
     try:
-        spin_until(ros_node, lambda: not replay.alive(), timeout=120.0)
-        spin_until(ros_node, lambda: len(received) >= len(recorded_verdicts()), timeout=5.0)
+        spin_until(ros_node, lambda: not any(r.alive() for r in replays), timeout=120.0)
+        spin_until(ros_node, lambda: all(len(v) >= expected for v in received.values()), timeout=5.0)
     finally:
-        code = replay.stop()
-        for node in nodes:
+        codes = [r.stop() for r in replays]
+        for node in processes:
             node.stop()
-    assert code == 0, replay.log_tail()
-    return received, "\n".join(n.log_tail() for n in [replay, *nodes])
+    logs = "\n".join(n.log_tail() for n in [*replays, *processes])
+    assert codes == [0] * len(replays), logs
+    return received, logs
 
 
 def assert_same_verdicts(received, expected, logs: str, phi_rel: float = 1e-6) -> None:
@@ -79,7 +92,7 @@ def assert_same_verdicts(received, expected, logs: str, phi_rel: float = 1e-6) -
 
 def test_replaying_the_sample_into_segmenter_and_grader_reproduces_its_verdicts(ros_node, ros_domain, tmp_path):
     received, logs = replay_into_vision(SAMPLE, CAMERA_TOPICS, ros_node, ros_domain, tmp_path)
-    assert_same_verdicts(received, recorded_verdicts(), logs)
+    assert_same_verdicts(received[""], recorded_verdicts(), logs)
 
 
 def as_a_camera_driver_sends_it(out):
@@ -117,7 +130,24 @@ def test_16uc1_depth_and_bgr8_colour_over_best_effort_give_the_same_verdicts(ros
     assert "Traceback" not in logs and "FrameError" not in logs, logs
     # Same class, lane, crossing stamp and side metrics; Φ moves (2-19 % on these three fillets) because
     # millimetre depth shifts the 5 mm height threshold by up to half a step on the fillets' thin edges.
-    assert_same_verdicts(received, recorded_verdicts(), logs, phi_rel=0.25)
+    assert_same_verdicts(received[""], recorded_verdicts(), logs, phi_rel=0.25)
+
+
+def test_two_namespaced_lines_share_a_domain_without_crosstalk(ros_node, ros_domain, tmp_path):
+    """The sample replayed into /line1 and /line2 at once: each line grades its own 3 fillets, nothing else.
+
+    /line2's grader calls everything woody (threshold 1000), so a verdict crossing over would show; a camera
+    frame crossing over would arrive twice and be logged out of order.
+    """
+    lines = {"/line1": {}, "/line2": {"threshold": 1000.0}}
+    root: list = []
+    from woody_msgs.msg import FilletVerdict
+
+    ros_node.create_subscription(FilletVerdict, "/grading/verdicts", root.append, 10)
+    received, logs = replay_into_vision(SAMPLE, CAMERA_TOPICS, ros_node, ros_domain, tmp_path, lines=lines)
+    assert_same_verdicts(received["/line1"], recorded_verdicts(), logs)
+    assert len(received["/line2"]) == 3 and {v.classification for v in received["/line2"]} == {FilletVerdict.CLASS_WOODY}
+    assert root == [] and "out-of-order" not in logs, logs
 
 
 def test_report_rebuilds_from_the_sample_bag(tmp_path):

@@ -89,6 +89,20 @@ def ros_args(params: dict[str, object]) -> list[str]:
     return args
 
 
+def namespace_args(namespace: str) -> list[str]:
+    """``-r`` rules that move a node into ``namespace`` with its own sim clock ("" = none).
+
+    The nodes' topic names are relative (REP 135), so ``__ns`` moves them all;
+    ``/clock`` is absolute by ROS convention (every ``use_sim_time`` node listens
+    to it), so each namespaced line gets ``<ns>/clock`` and two simulated lines
+    in one domain do not drive each other's time.
+    """
+    if not namespace:
+        return []
+    ns = "/" + namespace.strip("/")
+    return ["-r", f"__ns:={ns}", "-r", f"/clock:={ns}/clock"]
+
+
 def _scalar(value: object) -> str:
     if isinstance(value, str):
         return value if value else "''"
@@ -107,6 +121,7 @@ class NodeProcess:
         log_dir: Path,
         extra_args: Sequence[str] = (),
         env: dict[str, str] | None = None,
+        namespace: str = "",
     ) -> None:
         self.name = name
         self.log_path = Path(log_dir) / f"{name}.log"
@@ -115,8 +130,8 @@ class NodeProcess:
         child_env["ROS_DOMAIN_ID"] = str(domain_id)
         child_env.setdefault("PYTHONUNBUFFERED", "1")
         cmd = [entry_point(name), *extra_args]
-        if params:
-            cmd += ros_args(params)
+        if params or namespace:
+            cmd += ros_args(params or {}) + namespace_args(namespace)
         self.command = cmd
         self._log = open(self.log_path, "w")
         self.process = subprocess.Popen(

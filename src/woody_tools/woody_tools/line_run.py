@@ -9,6 +9,7 @@ and leaves the bag, verdicts.csv and report.md in the output folder.
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
 import time
@@ -35,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threshold", type=float, default=None, help="Φ threshold of the grader (default: its own)")
     parser.add_argument("--side-rate", type=float, default=60.0, help="side camera frame rate, Hz (default 60)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="run the line under NS (topics NS/..., sim clock NS/clock), so several lines share a "
+                             "ROS domain; default: the root namespace")
 
 
 def _validate(args: argparse.Namespace) -> None:
@@ -44,6 +48,8 @@ def _validate(args: argparse.Namespace) -> None:
         raise SystemExit(f"woody run: --speed-fpm must be in (0, 400], got {args.speed_fpm}")
     if args.fillets is not None and args.fillets < 1:
         raise SystemExit(f"woody run: --fillets must be >= 1, got {args.fillets}")
+    if args.namespace and not re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", args.namespace):
+        raise SystemExit(f"woody run: --namespace must be a ROS name like /line2, got '{args.namespace}'")
     if any(k < 0 for k in args.k):
         raise SystemExit(f"woody run: --k values must be >= 0, got {args.k}")
 
@@ -51,7 +57,7 @@ def _validate(args: argparse.Namespace) -> None:
 class LineMonitor:
     """This process's view of the line: ground truth, verdicts, gate commands and sim time."""
 
-    def __init__(self, domain_id: int) -> None:
+    def __init__(self, domain_id: int, namespace: str = "") -> None:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -60,7 +66,7 @@ class LineMonitor:
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node("woody_run_monitor", context=self.context)
+        self.node = rclpy.create_node("woody_run_monitor", context=self.context, namespace="/" + namespace.strip("/"))
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
@@ -70,10 +76,10 @@ class LineMonitor:
         self.verdicts: list[Verdict] = []
         self.gate_commands = 0
         self.sim_time = 0.0
-        self.node.create_subscription(FilletSpawn, "/line/ground_truth", self._on_spawn, latched)
-        self.node.create_subscription(FilletVerdict, "/grading/verdicts", self._on_verdict, reliable)
-        self.node.create_subscription(GateCommand, "/reject_gate/commands", self._on_gate, reliable)
-        self.node.create_subscription(Clock, "/clock", self._on_clock, 10)
+        self.node.create_subscription(FilletSpawn, "line/ground_truth", self._on_spawn, latched)
+        self.node.create_subscription(FilletVerdict, "grading/verdicts", self._on_verdict, reliable)
+        self.node.create_subscription(GateCommand, "reject_gate/commands", self._on_gate, reliable)
+        self.node.create_subscription(Clock, "clock" if namespace.strip("/") else "/clock", self._on_clock, 10)
 
     def _on_spawn(self, msg) -> None:
         self.spawns.append(Spawn(sim_id=msg.fillet_id, lane=msg.lane, mesh=msg.mesh, k=msg.stiffness, mass=msg.mass,
@@ -149,13 +155,14 @@ def run(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     error = None
     try:
-        start = lambda name, params: nodes.append(NodeProcess(name, params, domain_id=lease.domain_id, log_dir=logs))
-        start("recorder", {"use_sim_time": True, "output": str(bag)})
+        start = lambda name, params: nodes.append(NodeProcess(name, params, domain_id=lease.domain_id, log_dir=logs,
+                                                              namespace=args.namespace))
+        start("recorder", {"use_sim_time": True, "output": str(bag), **_recorded(args.namespace)})
         start("segmenter", vision_params)
         start("grader", grader_params)
         start("reject_gate", {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm})
         start("line_sim", sim_params)
-        monitor = LineMonitor(lease.domain_id)
+        monitor = LineMonitor(lease.domain_id, args.namespace)
         wall_start = time.monotonic()
         bar = tqdm(total=fillets or None, unit="fillet", desc="graded", dynamic_ncols=True, mininterval=1.0,
                    file=sys.stderr, disable=None if sys.stderr.isatty() else True)
@@ -220,6 +227,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"woody run: {error}", file=sys.stderr)
         return 1
     return 0
+
+
+def _recorded(namespace: str) -> dict[str, str]:
+    """Recorder parameters that keep a namespaced line's bag to its own topics (and clock)."""
+    ns = namespace.strip("/")
+    return {"topic_regex": f"^/{ns}/"} if ns else {}
 
 
 def _finished(monitor: LineMonitor, fillets: int | None, args: argparse.Namespace) -> bool:

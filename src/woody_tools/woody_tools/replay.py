@@ -60,6 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--progress", type=float, default=5.0, metavar="S",
                         help="print progress every S seconds (0 = never); default 5")
     parser.add_argument("--quiet", action="store_true", help="print only warnings and errors")
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="publish under NS: the bag's /a/b as NS/a/b and /clock as NS/clock, like the nodes of "
+                             "`woody run --namespace NS`")
 
 
 class _Stop:
@@ -154,6 +157,12 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(sig, handler)
 
 
+def moved(topic: str, namespace: str) -> str:
+    """A recorded (absolute) topic name moved under ``namespace`` ("" = unchanged)."""
+    ns = namespace.strip("/")
+    return f"/{ns}{topic}" if ns else topic
+
+
 class _Player:
     def __init__(self, node, args, path: str, info: dict, types: dict[str, type], clock_mode: str | None,
                  stop: _Stop) -> None:
@@ -162,12 +171,13 @@ class _Player:
 
         self.node, self.args, self.path, self.info, self.stop = node, args, path, info, stop
         self.clock_mode = clock_mode
-        self.publishers = {topic: node.create_publisher(cls, topic, _qos_for(info["topics"][topic]["qos"]))
+        self.publishers = {topic: node.create_publisher(cls, moved(topic, args.namespace),
+                                                        _qos_for(info["topics"][topic]["qos"]))
                            for topic, cls in types.items()}
         self.clock_publisher = None
         if clock_mode is not None:
             self.clock_publisher = node.create_publisher(
-                Clock, CLOCK, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+                Clock, moved(CLOCK, args.namespace), QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self._clock_msg = Clock()
         self._last_clock = -1
         self.topics = list(types) + ([CLOCK] if clock_mode == "recorded" else [])

@@ -72,11 +72,11 @@ class Grader(Node):
 
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         sensor = declare_image_qos(self)
-        self.verdict_pub = self.create_publisher(FilletVerdict, "/grading/verdicts", reliable)
-        self.create_subscription(CameraInfo, "/top_camera/depth/camera_info", self.on_camera_info, sensor)
-        self.create_subscription(FilletTrackArray, "/vision/tracks", self.on_tracks, QoSProfile(depth=50))
+        self.verdict_pub = self.create_publisher(FilletVerdict, "grading/verdicts", reliable)
+        self.create_subscription(CameraInfo, "top_camera/depth/camera_info", self.on_camera_info, sensor)
+        self.create_subscription(FilletTrackArray, "vision/tracks", self.on_tracks, QoSProfile(depth=50))
         if self.side is not None:
-            self.create_subscription(Image, "/side_camera/image_raw", self.on_side_image, sensor)
+            self.create_subscription(Image, "side_camera/image_raw", self.on_side_image, sensor)
         self.create_timer(0.1, self.on_timer)
         self.frame_id = ""
 

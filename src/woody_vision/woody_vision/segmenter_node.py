@@ -57,14 +57,14 @@ class Segmenter(Node):
         self.info_size: tuple[int, int] | None = None
 
         sensor = declare_image_qos(self)
-        self.tracks_pub = self.create_publisher(FilletTrackArray, "/vision/tracks", QoSProfile(depth=50))
-        self.debug_pub = self.create_publisher(Image, "/vision/debug_image", 5) if self.publish_debug else None
-        self.create_subscription(CameraInfo, "/top_camera/depth/camera_info", self.on_camera_info, sensor)
-        self.create_subscription(Image, "/top_camera/depth/image_raw", self.on_depth, sensor)
+        self.tracks_pub = self.create_publisher(FilletTrackArray, "vision/tracks", QoSProfile(depth=50))
+        self.debug_pub = self.create_publisher(Image, "vision/debug_image", 5) if self.publish_debug else None
+        self.create_subscription(CameraInfo, "top_camera/depth/camera_info", self.on_camera_info, sensor)
+        self.create_subscription(Image, "top_camera/depth/image_raw", self.on_depth, sensor)
         self.create_subscription(Empty, "~/reset_background", self.on_reset, 1)
         if self.publish_debug:
-            self.create_subscription(Image, "/top_camera/color/image_raw", self.on_color, sensor)
-            self.create_subscription(FilletVerdict, "/grading/verdicts", self.on_verdict, 50)
+            self.create_subscription(Image, "top_camera/color/image_raw", self.on_color, sensor)
+            self.create_subscription(FilletVerdict, "grading/verdicts", self.on_verdict, 50)
 
     def on_camera_info(self, info: CameraInfo) -> None:
         if self.tracker is None and info.k[0] > 0:
