@@ -27,10 +27,13 @@ from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.ros_params import declare, run_node
+from woody_sim.sensor_model import sensor_preset, to_message_array
 from woody_sim.spawn_schedule import SpawnSchedule
 
 TOP_FRAME = "top_camera_optical_frame"
 SIDE_FRAME = "side_camera_optical_frame"
+SENSOR_STREAM = 11
+"""Second seed word of the camera error model's random stream (the first is the node's ``seed``)."""
 CLOCK_PERIOD = 0.005
 """Sim seconds between /clock messages (200 Hz) besides one per camera frame."""
 
@@ -65,6 +68,9 @@ class LineSim(Node):
                                 0.0, 1e6)
         self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
                                         "subscribers listen to the top depth image.", 0, 100)
+        self.sensor = sensor_preset(declare(self, "sensor", "ideal", "Top RGB-D camera error model: ideal, stereo "
+                                            "or structured_light (docs/sensors.md)."))
+        self.sensor_rng = np.random.default_rng([seed, SENSOR_STREAM])
         if not self.k_values or any(k < 0 for k in self.k_values):
             raise ValueError(f"k_values must be a non-empty list of values >= 0, got {self.k_values}")
         if side_lane >= lanes:
@@ -103,7 +109,7 @@ class LineSim(Node):
         self.get_logger().info(
             f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
             f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
-            f"side {side_rate:g} Hz on lane {self.geometry.watched_lane}")
+            f"side {side_rate:g} Hz on lane {self.geometry.watched_lane}, top camera model {self.sensor.name}")
 
     # ------------------------------------------------------------------ spawning
 
@@ -158,10 +164,11 @@ class LineSim(Node):
         self.clock_pub.publish(msg)
 
     def _publish_frames(self, frames, stamp: float) -> None:
-        if frames.top_rgb is not None:
+        if frames.top_rgb is not None and not self.sensor.drop(self.sensor_rng):
             header = self._header(TOP_FRAME, stamp)
-            self.color_pub.publish(_image(frames.top_rgb, "rgb8", header))
-            self.depth_pub.publish(_image(frames.top_depth, "32FC1", header))
+            depth = to_message_array(self.sensor.depth(frames.top_depth, self.sensor_rng), self.sensor.encoding)
+            self.color_pub.publish(_image(self.sensor.color(frames.top_rgb, self.sensor_rng), "rgb8", header))
+            self.depth_pub.publish(_image(depth, self.sensor.encoding, header))
             self.top_info.header = header
             self.color_info_pub.publish(self.top_info)
             self.depth_info_pub.publish(self.top_info)
@@ -236,7 +243,7 @@ class LineSim(Node):
 
 
 def _image(array: np.ndarray, encoding: str, header: Header) -> Image:
-    """A sensor_msgs/Image (REP 118 encodings rgb8 / 32FC1) from a contiguous numpy array."""
+    """A sensor_msgs/Image (REP 118 encodings rgb8 / 32FC1 / 16UC1) from a contiguous numpy array."""
     array = np.ascontiguousarray(array)
     msg = Image(header=header, height=array.shape[0], width=array.shape[1], encoding=encoding, is_bigendian=0,
                 step=array.strides[0])

@@ -16,6 +16,7 @@ import time
 from datetime import datetime
 from pathlib import Path
 
+from woody_sim.sensor_model import PRESETS
 from woody_tools.graph import NodeProcess, lease_domain, wait_for
 from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
 
@@ -36,6 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threshold", type=float, default=None, help="Φ threshold of the grader (default: its own)")
     parser.add_argument("--side-rate", type=float, default=60.0, help="side camera frame rate, Hz (default 60)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
+    parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
+                        help="top camera error model (docs/sensors.md); default ideal")
     parser.add_argument("--namespace", default="", metavar="NS",
                         help="run the line under NS (topics NS/..., sim clock NS/clock), so several lines share a "
                              "ROS domain; default: the root namespace")
@@ -137,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     sim_params: dict[str, object] = {
         "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
         "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
-        "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
+        "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2, "sensor": args.sensor,
     }
     vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes}
     grader_params = dict(vision_params)
@@ -219,7 +222,7 @@ def run(args: argparse.Namespace) -> int:
     info = {"lanes": args.lanes, "line speed (FPM)": args.speed_fpm, "stiffness mix k": ", ".join(f"{k:g}" for k in args.k),
             "meshes": args.meshes, "seed": args.seed, "fillets spawned": len(monitor.spawns),
             "verdicts": len(monitor.verdicts), "gate commands": monitor.gate_commands,
-            "sim time (s)": f"{monitor.sim_time:.1f}", "paced to wall clock": args.realtime}
+            "sim time (s)": f"{monitor.sim_time:.1f}", "paced to wall clock": args.realtime, "top camera": args.sensor}
     report = build_report(rows, out, title="woody line run", run_info=info)
     print(verdict_table(rows))
     print(f"\nbag: {bag}\nverdicts: {csv_path}\nreport: {report}\nnode logs: {logs}/")

@@ -22,6 +22,7 @@ import sys
 import time
 from pathlib import Path
 
+from woody_sim.sensor_model import PRESETS
 from woody_tools.experiment import RUN_COLUMNS, RunSpec
 
 TOP_K = (0.0, 20.0, 40.0, 60.0, 80.0, 100.0)
@@ -60,6 +61,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mass", type=float, default=None,
                         help="total chain mass M in kg (default: the calibrated fillet_model.DEFAULT_TOTAL_MASS)")
     parser.add_argument("--no-side", action="store_true", help="skip the side view (top-down Φ only)")
+    parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
+                        help="top camera error model (docs/sensors.md); use its own --out; default ideal")
     parser.add_argument("--no-report", action="store_true", help="only run; do not rebuild results.md and plots")
     parser.add_argument("--docs", default=None, metavar="DIR",
                         help="also write results.md to DIR/results.md and the plots to DIR/results/ (e.g. docs)")
@@ -177,9 +180,9 @@ def run_grid(runs: list[RunSpec], mesh_spec: str, jobs: int, csv_path: Path, des
 
 
 def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
-         side: bool = True) -> list[RunSpec]:
+         side: bool = True, sensor: str = "ideal") -> list[RunSpec]:
     """Runs ordered so that partial results already span the grid (k and speed vary fastest)."""
-    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side)
+    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side, sensor=sensor)
             for name in mesh_names for speed in speeds for k in ks]
 
 
@@ -202,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     csv_path = out / CSV_FILE
     done = completed_runs(csv_path, args.lanes)
-    runs = plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side)
+    runs = plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, sensor=args.sensor)
     todo = [r for r in runs if _key(r.mesh, r.k, r.speed_fpm, mass) not in done]
     print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds = {len(runs)} runs "
           f"({len(runs) - len(todo)} already in {csv_path}, {len(todo)} to go), {args.lanes} lanes, "
@@ -241,4 +244,6 @@ def _argv(args: argparse.Namespace) -> list[str]:
            "--jobs", str(args.jobs), "--out", str(args.out)]
     if args.mass is not None:
         out += ["--mass", f"{args.mass:g}"]
+    if args.sensor != "ideal":
+        out += ["--sensor", args.sensor]
     return out
