@@ -107,10 +107,16 @@ def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_d
     """16UC1 millimetre depth with 0 where nothing was measured, noisy colour, a few dropped frames at most."""
     from sensor_msgs.msg import Image
 
+    from geometry_msgs.msg import PoseStamped
+    from scipy.spatial.transform import Rotation
+
     frames: dict[str, list] = {"depth": [], "color": []}
     best_effort = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)
     for kind in frames:
         ros_node.create_subscription(Image, f"/top_camera/{kind}/image_raw", frames[kind].append, best_effort)
+    poses: list = []
+    ros_node.create_subscription(PoseStamped, "/top_camera/pose", poses.append,
+                                 QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     sim = NodeProcess("line_sim", {"duration_s": 1.0, "wait_for_subscribers": 1, "side_rate_hz": 0.0,
                                    "sensor": "structured_light"}, domain_id=ros_domain, log_dir=tmp_path)
     try:
@@ -119,6 +125,11 @@ def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_d
     finally:
         assert sim.stop() == 0, sim.log_tail()
     assert 25 <= len(frames["depth"]) <= 31 and len(frames["color"]) == len(frames["depth"])
+    (pose,) = poses  # the camera 0.75 m over the belt, its optical axis (z) pointing down, image rows downstream
+    assert pose.header.frame_id == "world" and pose.pose.position.z == pytest.approx(0.75)
+    q = pose.pose.orientation
+    axes = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    assert np.allclose(axes[:, 2], [0, 0, -1]) and np.allclose(axes[:, 1], [1, 0, 0])
     depth = frames["depth"][0]
     assert depth.encoding == "16UC1" and depth.step == 672 * 2
     mm = np.frombuffer(bytes(depth.data), np.uint16).reshape(376, 672)

@@ -91,8 +91,17 @@ def assert_same_verdicts(received, expected, logs: str, phi_rel: float = 1e-6) -
 
 
 def test_replaying_the_sample_into_segmenter_and_grader_reproduces_its_verdicts(ros_node, ros_domain, tmp_path):
+    from visualization_msgs.msg import ImageMarker
+
+    markers: list = []
+    ros_node.create_subscription(ImageMarker, "/grading/markers", markers.append, 500)
     received, logs = replay_into_vision(SAMPLE, CAMERA_TOPICS, ros_node, ros_domain, tmp_path)
     assert_same_verdicts(received[""], recorded_verdicts(), logs)
+    # the overlay Foxglove draws on the top image: every track's contour, named by lane and verdict
+    assert markers and all(m.type == ImageMarker.POLYGON and len(m.points) >= 3 for m in markers)
+    labels = {m.ns.split("/")[1] for m in markers}
+    assert "pending" in labels and labels & {"normal", "woody"}, labels
+    assert {m.ns.split("/")[0] for m in markers} == {f"lane{v.lane}" for v in recorded_verdicts()}
 
 
 def as_a_camera_driver_sends_it(out):

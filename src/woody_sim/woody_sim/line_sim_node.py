@@ -15,7 +15,9 @@ import numpy as np
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 from woody_msgs.msg import FilletSpawn
@@ -30,6 +32,7 @@ from woody_sim.ros_params import declare, run_node
 from woody_sim.sensor_model import sensor_preset, to_message_array
 from woody_sim.spawn_schedule import SpawnSchedule
 
+WORLD_FRAME = "world"
 TOP_FRAME = "top_camera_optical_frame"
 SIDE_FRAME = "side_camera_optical_frame"
 SENSOR_STREAM = 11
@@ -106,6 +109,10 @@ class LineSim(Node):
         self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
         self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
         self.create_service(SpawnFillet, "spawn_fillet", self.on_spawn_request)
+        self.pose_pubs = [self.create_publisher(PoseStamped, f"{name}/pose", latched)
+                          for name in ("top_camera", "side_camera")]
+        for publisher, camera in zip(self.pose_pubs, (self.geometry.top_camera(), self.geometry.side_camera())):
+            publisher.publish(_camera_pose(camera))
         self.get_logger().info(
             f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
             f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
@@ -121,7 +128,7 @@ class LineSim(Node):
                           damping=float(self.world.config.damping), mass=float(mass), line_speed=float(speed),
                           segments=model.n_segments, length=float(mesh.length), width=float(mesh.width),
                           thickness=float(mesh.thickness))
-        msg.header = self._header("world")
+        msg.header = self._header(WORLD_FRAME)
         msg.position.x, msg.position.y = float(self.geometry.spawn_x), float(self.geometry.lane_y(lane))
         self.truth_pub.publish(msg)
         self.spawned += 1
@@ -249,6 +256,20 @@ def _image(array: np.ndarray, encoding: str, header: Header) -> Image:
                 step=array.strides[0])
     msg.data = array.tobytes()
     return msg
+
+
+def _camera_pose(camera) -> PoseStamped:
+    """The camera's optical frame in the world frame (x downstream, z up, the roller edge at x = 0).
+
+    Published latched instead of on /tf: tf2_msgs has no PyPI wheel (README, "Real camera").
+    """
+    pose = PoseStamped()
+    pose.header.frame_id = WORLD_FRAME
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(c) for c in camera.position)
+    x, y, z, w = Rotation.from_matrix(np.asarray(camera.rotation, dtype=float)).as_quat()
+    pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z, pose.pose.orientation.w = (
+        float(x), float(y), float(z), float(w))
+    return pose
 
 
 def _camera_info(camera, frame_id: str) -> CameraInfo:

@@ -82,7 +82,8 @@ class Segmenter(Node):
         self.latest_color = msg
 
     def on_verdict(self, msg: FilletVerdict) -> None:
-        self.scores[msg.fillet_id] = f"{msg.phi:.1f}"
+        verdict = {FilletVerdict.CLASS_NORMAL: "normal", FilletVerdict.CLASS_WOODY: "woody"}
+        self.scores[msg.fillet_id] = f"phi {msg.phi:.1f} {verdict.get(msg.classification, 'unscored')}"
         while len(self.scores) > 200:  # only fillets still in view need their score
             self.scores.pop(next(iter(self.scores)))
 
