@@ -198,6 +198,23 @@ def test_non_finite_pixels_inside_a_fillet_do_not_poison_it():
     assert blob.mean_height_m == pytest.approx(0.03, abs=1e-6)
 
 
+def test_holes_and_noise_of_a_real_camera_are_filled_and_smoothed_before_the_contour():
+    rng = np.random.default_rng(0)
+    background = np.full((200, 200), 0.75, np.float32)
+    depth = background + rng.normal(0.0, 0.002, background.shape).astype(np.float32)
+    depth[50:150, 50:150] -= 0.02
+    depth[45:56, 90:101] = np.nan  # a hole across the top border
+    depth[120:126, 145:151] = 0.0  # and one on the right border
+    raw = segment_depth(depth, background)
+    (clean,) = segment_depth(depth, background, SegmentationParams(fill_invalid_px=4, median_px=5))
+    assert clean.area_px == pytest.approx(100 * 100, rel=0.03)
+    hull = cv2.contourArea(cv2.convexHull(clean.contour))
+    assert cv2.contourArea(clean.contour) / hull > 0.97  # no notches left by the holes
+    assert sum(b.area_px for b in raw) < clean.area_px
+    with pytest.raises(ValueError):
+        SegmentationParams(median_px=4)
+
+
 def test_empty_frames_give_no_blobs():
     background = TopScene([]).background_depth()
     assert segment_depth(background.copy(), background) == []

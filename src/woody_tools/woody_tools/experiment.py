@@ -39,7 +39,7 @@ from woody_sim.rendering import LineRenderer
 from woody_sim.sensor_model import sensor_preset
 from woody_vision.camera_model import LaneLayout
 from woody_vision.grader_core import FilletGrader, TrackObservation
-from woody_vision.segmentation import BackgroundModel, segment_depth
+from woody_vision.segmentation import BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.side_view import SidePassageTracker
 from woody_vision.tracking import CentroidTracker
 
@@ -58,6 +58,8 @@ SIDE_DONE_DISTANCE = 0.12
 """The side passage is closed once the watched fillet's centre of mass is below the axle and this far (m) from it:
 the centroid only moves away from the axle from then on (it falls), so no later frame can lower the MDM."""
 MAX_SIM_S = 4.0
+REAL_CAMERA_SEGMENTATION = SegmentationParams(fill_invalid_px=4, median_px=5)
+"""What the README recommends for a real camera (segmenter fill_invalid_px:=4 median_px:=5)."""
 BACKGROUND_FRAMES = 5
 """Noisy empty-belt frames the background is learned from (the segmenter's default ``background_frames``)."""
 
@@ -120,6 +122,7 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
             tracker = CentroidTracker(lane_layout=layout)
             camera, camera_rng = sensor_preset(spec.sensor), np.random.default_rng(_sensor_seed(spec))
             background = BackgroundModel(1 if camera.ideal else BACKGROUND_FRAMES)
+            segmentation = SegmentationParams() if camera.ideal else REAL_CAMERA_SEGMENTATION
             while not background.ready:
                 background.add(camera.depth(top_bg, camera_rng))
         if spec.side:
@@ -148,7 +151,8 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                     _, depth = renderer.render_top(poses)
                     n_top += 1
                     if not camera.drop(camera_rng):
-                        update = tracker.update(segment_depth(camera.depth(depth, camera_rng), background.depth))
+                        noisy = camera.depth(depth, camera_rng)
+                        update = tracker.update(segment_depth(noisy, background.depth, segmentation))
                         observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen)
                                         for t in update.active]
                         for graded in grader.on_tracks(now, observations, [t.track_id for t in update.ended]):

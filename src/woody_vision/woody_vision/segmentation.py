@@ -52,6 +52,11 @@ class SegmentationParams:
     """Components less solid (area / hull area) than this are checked for several fillets."""
     core_ratio: float = 0.5
     """Watershed markers: the component's pixels farther than this × its max distance from the border."""
+    fill_invalid_px: int = 0
+    """Pixels without a depth measurement take the mean height of the valid ones within this radius (0 = off):
+    a real camera's holes at a fillet's border would otherwise notch its contour."""
+    median_px: int = 0
+    """Median filter of the height map (0 = off, 3 or 5): a noisy camera's depth would otherwise fray contours."""
 
     def __post_init__(self) -> None:
         if not self.height_threshold_m > 0.0:
@@ -64,6 +69,9 @@ class SegmentationParams:
             raise ValueError(f"split_solidity must be in (0, 1], got {self.split_solidity}")
         if not 0.0 < self.core_ratio < 1.0:
             raise ValueError(f"core_ratio must be in (0, 1), got {self.core_ratio}")
+        if self.fill_invalid_px < 0 or self.median_px not in (0, 3, 5):
+            raise ValueError(f"fill_invalid_px must be >= 0 and median_px 0, 3 or 5, got {self.fill_invalid_px}, "
+                             f"{self.median_px}")
 
 
 class BackgroundModel:
@@ -128,7 +136,24 @@ def segment_depth(
     depth: np.ndarray, background: np.ndarray, params: SegmentationParams = SegmentationParams()
 ) -> list[Blob]:
     """Segment the fillets in a depth frame against a background depth."""
-    return segment_height_map(height_map(depth, background), params)
+    height = height_map(depth, background)
+    if params.fill_invalid_px:
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(depth) & (depth > 0.0) & np.isfinite(background)
+        height = fill_invalid(height, valid, params.fill_invalid_px)
+    if params.median_px:
+        height = cv2.medianBlur(height, params.median_px)
+    return segment_height_map(height, params)
+
+
+def fill_invalid(height: np.ndarray, valid: np.ndarray, radius_px: int) -> np.ndarray:
+    """Invalid pixels get the mean height of the valid pixels in a (2r+1)² box around them (0 if there are none)."""
+    size = (2 * radius_px + 1, 2 * radius_px + 1)
+    weights = valid.astype(np.float32)
+    total = cv2.boxFilter(height * weights, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    count = cv2.boxFilter(weights, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    mean = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
+    return np.where(valid, height, mean).astype(np.float32)
 
 
 def segment_height_map(height: np.ndarray, params: SegmentationParams = SegmentationParams()) -> list[Blob]:

@@ -37,6 +37,10 @@ class Segmenter(Node):
             height_threshold_m=declare(self, "height_threshold_m", 0.005, "Height above the belt background that "
                                        "counts as fillet (m).", 0.0005, 0.1),
             min_area_px=declare(self, "min_area_px", 500, "Blobs smaller than this are dropped (px).", 1, 100000),
+            fill_invalid_px=declare(self, "fill_invalid_px", 0, "Pixels without depth take the mean height of the "
+                                    "valid ones within this radius (px; 0 = off; 4 for a real camera).", 0, 50),
+            median_px=declare(self, "median_px", 0, "Median filter of the height map: 0 (off), 3 or 5 (a noisy "
+                              "real camera).", 0, 5),
         )
         self.lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
         self.lane_pitch = declare(self, "lane_pitch_m", 0.16, "Distance between lane centres (m).", 0.01, 2.0)
