@@ -147,6 +147,12 @@ def test_topics_live_nodes_publish_are_not_replayed_unless_asked(ros_node, ros_d
     assert len(listener.got[VERDICTS]) == len(VERDICT_TIMES) and len(listener.got[TRACKS]) == len(TRACK_TIMES)
 
 
+def test_a_namespace_moves_every_recorded_topic_and_the_clock():
+    assert replay.moved("/grading/verdicts", "") == "/grading/verdicts"
+    assert replay.moved("/grading/verdicts", "/line2/") == "/line2/grading/verdicts"
+    assert replay.moved("/clock", "line2") == "/line2/clock"
+
+
 def test_truncated_bag_plays_its_readable_part(ros_node, ros_domain, tmp_path):
     full = write_bag(tmp_path / "full.mcap", images=True, chunk_size=20_000, compression="none")
     data = full.read_bytes()

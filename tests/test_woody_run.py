@@ -39,6 +39,10 @@ def test_woody_run_leaves_bag_table_and_report(tmp_path):
     assert counts["/line2/grading/verdicts"] == 3 and counts["/line2/line/ground_truth"] == 3
     assert counts["/line2/top_camera/depth/image_raw"] > 30 and counts["/line2/clock"] > 100
     assert "fillet_id" in result.stdout and str(out / "line.mcap") in result.stdout
+    report = subprocess.run([entry_point("woody"), "report", str(out / "line.mcap"), "--out", str(tmp_path / "again")],
+                            capture_output=True, text=True, timeout=120)
+    assert report.returncode == 0, report.stderr  # the namespaced bag's verdicts and ground truth are found
+    assert len((tmp_path / "again" / "verdicts.csv").read_text().splitlines()) == 4
 
 
 def test_a_dying_node_stops_the_run_and_the_bag_is_finalised(tmp_path):
