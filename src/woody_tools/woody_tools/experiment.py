@@ -39,7 +39,7 @@ from woody_sim.rendering import LineRenderer
 from woody_sim.sensor_model import sensor_preset
 from woody_vision.camera_model import LaneLayout
 from woody_vision.grader_core import FilletGrader, TrackObservation
-from woody_vision.segmentation import BackgroundModel, SegmentationParams, segment_depth
+from woody_vision.segmentation import REAL_CAMERA_FILTERS, BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.side_view import SidePassageTracker
 from woody_vision.tracking import CentroidTracker
 
@@ -58,8 +58,7 @@ SIDE_DONE_DISTANCE = 0.12
 """The side passage is closed once the watched fillet's centre of mass is below the axle and this far (m) from it:
 the centroid only moves away from the axle from then on (it falls), so no later frame can lower the MDM."""
 MAX_SIM_S = 4.0
-REAL_CAMERA_SEGMENTATION = SegmentationParams(fill_invalid_px=4, median_px=5)
-"""What the README recommends for a real camera (segmenter fill_invalid_px:=4 median_px:=5)."""
+REAL_CAMERA_SEGMENTATION = SegmentationParams(**REAL_CAMERA_FILTERS)
 BACKGROUND_FRAMES = 5
 """Noisy empty-belt frames the background is learned from (the segmenter's default ``background_frames``)."""
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from woody_sim.sensor_model import PRESETS
 from woody_tools.graph import NodeProcess, lease_domain, wait_for
 from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
+from woody_vision.segmentation import REAL_CAMERA_FILTERS
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -143,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
         "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2, "sensor": args.sensor,
     }
     vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes}
+    segmenter_params = dict(vision_params, **({} if args.sensor == "ideal" else REAL_CAMERA_FILTERS))
     grader_params = dict(vision_params)
     if args.threshold is not None:
         grader_params["threshold"] = args.threshold
@@ -161,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
         start = lambda name, params: nodes.append(NodeProcess(name, params, domain_id=lease.domain_id, log_dir=logs,
                                                               namespace=args.namespace))
         start("recorder", {"use_sim_time": True, "output": str(bag), **_recorded(args.namespace)})
-        start("segmenter", vision_params)
+        start("segmenter", segmenter_params)
         start("grader", grader_params)
         start("reject_gate", {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm})
         start("line_sim", sim_params)

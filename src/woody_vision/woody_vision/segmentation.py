@@ -24,6 +24,8 @@ DEFAULT_HEIGHT_THRESHOLD_M = 0.005
 """Pixels rising more than this above the learned background belong to a fillet."""
 DEFAULT_MIN_AREA_PX = 500
 """Blobs smaller than this are noise or slivers, never a fillet (paper: 500 px)."""
+REAL_CAMERA_FILTERS = {"fill_invalid_px": 4, "median_px": 5, "blur_px": 1.5}
+"""The hole filling and smoothing recommended for a real (or modelled) camera (README, "Real camera")."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +59,9 @@ class SegmentationParams:
     a real camera's holes at a fillet's border would otherwise notch its contour."""
     median_px: int = 0
     """Median filter of the height map (0 = off, 3 or 5): a noisy camera's depth would otherwise fray contours."""
+    blur_px: float = 0.0
+    """Gaussian σ (px) smoothing the height map after the median (0 = off): frayed contours lose solidity and
+    would be split as if they were two touching fillets."""
 
     def __post_init__(self) -> None:
         if not self.height_threshold_m > 0.0:
@@ -69,9 +74,9 @@ class SegmentationParams:
             raise ValueError(f"split_solidity must be in (0, 1], got {self.split_solidity}")
         if not 0.0 < self.core_ratio < 1.0:
             raise ValueError(f"core_ratio must be in (0, 1), got {self.core_ratio}")
-        if self.fill_invalid_px < 0 or self.median_px not in (0, 3, 5):
-            raise ValueError(f"fill_invalid_px must be >= 0 and median_px 0, 3 or 5, got {self.fill_invalid_px}, "
-                             f"{self.median_px}")
+        if self.fill_invalid_px < 0 or self.median_px not in (0, 3, 5) or self.blur_px < 0:
+            raise ValueError(f"fill_invalid_px and blur_px must be >= 0 and median_px 0, 3 or 5, got "
+                             f"{self.fill_invalid_px}, {self.blur_px}, {self.median_px}")
 
 
 class BackgroundModel:
@@ -143,6 +148,8 @@ def segment_depth(
         height = fill_invalid(height, valid, params.fill_invalid_px)
     if params.median_px:
         height = cv2.medianBlur(height, params.median_px)
+    if params.blur_px:
+        height = cv2.GaussianBlur(height, (0, 0), params.blur_px)
     return segment_height_map(height, params)
 
 
