@@ -24,7 +24,7 @@ DEFAULT_HEIGHT_THRESHOLD_M = 0.005
 """Pixels rising more than this above the learned background belong to a fillet."""
 DEFAULT_MIN_AREA_PX = 500
 """Blobs smaller than this are noise or slivers, never a fillet (paper: 500 px)."""
-REAL_CAMERA_FILTERS = {"fill_invalid_px": 4, "median_px": 5, "blur_px": 1.5}
+REAL_CAMERA_FILTERS = {"fill_invalid_px": 4, "median_px": 5, "blur_px": 1.0}
 """The hole filling and smoothing recommended for a real (or modelled) camera (README, "Real camera")."""
 
 

@@ -42,7 +42,7 @@ class Segmenter(Node):
             median_px=declare(self, "median_px", 0, "Median filter of the height map: 0 (off), 3 or 5 (a noisy "
                               "real camera).", 0, 5),
             blur_px=declare(self, "blur_px", 0.0, "Gaussian sigma smoothing the height map after the median (px; 0 = "
-                            "off; 1.5 for a real camera).", 0.0, 20.0),
+                            "off; 1.0 for a real camera).", 0.0, 20.0),
         )
         self.lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
         self.lane_pitch = declare(self, "lane_pitch_m", 0.16, "Distance between lane centres (m).", 0.01, 2.0)
