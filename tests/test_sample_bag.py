@@ -155,7 +155,8 @@ def test_two_namespaced_lines_share_a_domain_without_crosstalk(ros_node, ros_dom
     ros_node.create_subscription(FilletVerdict, "/grading/verdicts", root.append, 10)
     received, logs = replay_into_vision(SAMPLE, CAMERA_TOPICS, ros_node, ros_domain, tmp_path, lines=lines)
     assert_same_verdicts(received["/line1"], recorded_verdicts(), logs)
-    assert len(received["/line2"]) == 3 and {v.classification for v in received["/line2"]} == {FilletVerdict.CLASS_WOODY}
+    assert len(received["/line2"]) == 3
+    assert {v.classification for v in received["/line2"]} == {FilletVerdict.CLASS_WOODY}
     assert root == [] and "out-of-order" not in logs, logs
 
 

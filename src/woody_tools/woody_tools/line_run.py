@@ -70,7 +70,8 @@ class LineMonitor:
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node("woody_run_monitor", context=self.context, namespace="/" + namespace.strip("/"))
+        self.node = rclpy.create_node("woody_run_monitor", context=self.context,
+                                      namespace="/" + namespace.strip("/"))
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
@@ -224,7 +225,8 @@ def run(args: argparse.Namespace) -> int:
     info = {"lanes": args.lanes, "line speed (FPM)": args.speed_fpm, "stiffness mix k": ", ".join(f"{k:g}" for k in args.k),
             "meshes": args.meshes, "seed": args.seed, "fillets spawned": len(monitor.spawns),
             "verdicts": len(monitor.verdicts), "gate commands": monitor.gate_commands,
-            "sim time (s)": f"{monitor.sim_time:.1f}", "paced to wall clock": args.realtime, "top camera": args.sensor}
+            "sim time (s)": f"{monitor.sim_time:.1f}", "paced to wall clock": args.realtime,
+            "top camera": args.sensor}
     report = build_report(rows, out, title="woody line run", run_info=info)
     print(verdict_table(rows))
     print(f"\nbag: {bag}\nverdicts: {csv_path}\nreport: {report}\nnode logs: {logs}/")
