@@ -104,6 +104,42 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
     assert len(commands) == len(woody) and {c.fillet_id for c in commands} == {v.fillet_id for v in woody}
 
 
+def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_domain, tmp_path):
+    """16UC1 millimetre depth with 0 where nothing was measured, noisy colour, a few dropped frames at most."""
+    from sensor_msgs.msg import Image
+
+    from geometry_msgs.msg import PoseStamped
+    from scipy.spatial.transform import Rotation
+
+    frames: dict[str, list] = {"depth": [], "color": []}
+    best_effort = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)
+    for kind in frames:
+        ros_node.create_subscription(Image, f"/top_camera/{kind}/image_raw", frames[kind].append, best_effort)
+    poses: list = []
+    ros_node.create_subscription(PoseStamped, "/top_camera/pose", poses.append,
+                                 QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    sim = NodeProcess("line_sim", {"duration_s": 1.0, "wait_for_subscribers": 1, "side_rate_hz": 0.0,
+                                   "sensor": "structured_light"}, domain_id=ros_domain, log_dir=tmp_path)
+    try:
+        spin_until(ros_node, lambda: not sim.alive(), timeout=120.0)
+        spin_until(ros_node, lambda: False, timeout=1.0)
+    finally:
+        assert sim.stop() == 0, sim.log_tail()
+    assert 25 <= len(frames["depth"]) <= 31 and len(frames["color"]) == len(frames["depth"])
+    (pose,) = poses  # the camera 0.75 m over the belt, its optical axis (z) pointing down, image rows downstream
+    assert pose.header.frame_id == "world" and pose.pose.position.z == pytest.approx(0.75)
+    q = pose.pose.orientation
+    axes = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    assert np.allclose(axes[:, 2], [0, 0, -1]) and np.allclose(axes[:, 1], [1, 0, 0])
+    depth = frames["depth"][0]
+    assert depth.encoding == "16UC1" and depth.step == 672 * 2
+    mm = np.frombuffer(bytes(depth.data), np.uint16).reshape(376, 672)
+    assert 0.001 < (mm == 0).mean() < 0.1  # holes and edge bands
+    assert abs(int(np.median(mm[150:220, 300:370])) - 750) <= 3  # the belt, in millimetres
+    rgb = np.frombuffer(bytes(frames["color"][0].data), np.uint8).reshape(376, 672, 3)
+    assert np.std(rgb[150:220, 300:370].astype(float)) > 1.0  # pixel noise on the uniform belt
+
+
 def test_bad_parameters_are_refused_with_the_reason(tmp_path):
     import subprocess
 
@@ -112,8 +148,8 @@ def test_bad_parameters_are_refused_with_the_reason(tmp_path):
     cases = {
         "line_sim": [("line_speed_fpm", "0.0", "line_speed_fpm"), ("lanes", "7", "lanes"),
                      ("k_values", "[-1.0]", "k_values"), ("meshes", str(tmp_path / "none"), "none"),
-                     ("top_camera", "wide", "known: default, paper")],
-        "segmenter": [("min_area_px", "0", "min_area_px")],
+                     ("top_camera", "wide", "known: default, paper"), ("sensor", "lidar", "sensor 'lidar'")],
+        "segmenter": [("min_area_px", "0", "min_area_px"), ("image_qos", "fast", "image_qos")],
         "grader": [("threshold", "-1.0", "threshold"), ("side_lane", "4", "side_lane")],
         "reject_gate": [("gate_distance_m", "[0.5,0.6]", "gate_distance_m")],
     }

@@ -126,6 +126,34 @@ def test_rate_topic_filter_and_synthesised_clock(ros_node, ros_domain, tmp_path)
     assert stamps[0] >= T0 + 0.05e9 - 1 and stamps[-1] == T0 + round(0.8e9)
 
 
+def test_topics_live_nodes_publish_are_not_replayed_unless_asked(ros_node, ros_domain, tmp_path):
+    """Replaying into a running graph: the live grader's verdicts and clock are not doubled by the bag's."""
+    from rosgraph_msgs.msg import Clock
+
+    bag = write_bag(tmp_path / "line.mcap")
+    ros_node.create_publisher(TOPICS[VERDICTS][0], VERDICTS, 10)  # stands in for a live grader
+    ros_node.create_publisher(Clock, "/clock", 10)  # and a live simulator
+    listener = Listener(ros_node)
+    proc = start_replay(ros_domain, tmp_path, str(bag), "--discovery", "15")
+    listener.spin_while(proc, timeout=40.0)
+    _, err = proc.communicate()
+    assert proc.returncode == 0, err
+    assert listener.got[VERDICTS] == [] and listener.got["/clock"] == [], err
+    assert len(listener.got[TRACKS]) == len(TRACK_TIMES)
+    assert err.startswith("replay: not replaying topics live nodes publish")
+    assert "/grading/verdicts (by pytest_probe)" in err
+    proc = start_replay(ros_domain, tmp_path, str(bag), "--keep-live", "--exclude", TRACKS)
+    listener.spin_while(proc)
+    assert proc.communicate()[1] == "" and proc.returncode == 0
+    assert len(listener.got[VERDICTS]) == len(VERDICT_TIMES) and len(listener.got[TRACKS]) == len(TRACK_TIMES)
+
+
+def test_a_namespace_moves_every_recorded_topic_and_the_clock():
+    assert replay.moved("/grading/verdicts", "") == "/grading/verdicts"
+    assert replay.moved("/grading/verdicts", "/line2/") == "/line2/grading/verdicts"
+    assert replay.moved("/clock", "line2") == "/line2/clock"
+
+
 def test_truncated_bag_plays_its_readable_part(ros_node, ros_domain, tmp_path):
     full = write_bag(tmp_path / "full.mcap", images=True, chunk_size=20_000, compression="none")
     data = full.read_bytes()

@@ -17,8 +17,8 @@ import pytest
 from woody_vision.camera_model import LaneLayout, lane_center_u
 from woody_vision.frame_checks import RESIZE_CONFIRM_FRAMES, FrameChecker, FrameError, image_to_array
 from woody_vision.grading import GradingRules
-from woody_vision.segmentation import (DEFAULT_HEIGHT_THRESHOLD_M, Blob, BackgroundModel, SegmentationParams,
-                                       height_map, segment_depth)
+from woody_vision.segmentation import (DEFAULT_HEIGHT_THRESHOLD_M, REAL_CAMERA_FILTERS, Blob, BackgroundModel,
+                                       SegmentationParams, height_map, segment_depth)
 from woody_vision.synthetic import (
     DEFAULT_CAMERA_HEIGHT_M,
     DEFAULT_TOP_K,
@@ -208,6 +208,24 @@ def test_non_finite_pixels_inside_a_fillet_do_not_poison_it():
     (blob,) = segment_depth(depth, background)
     assert blob.area_px == pytest.approx(100 * 100 - 25, abs=20)
     assert blob.mean_height_m == pytest.approx(0.03, abs=1e-6)
+
+
+def test_holes_and_noise_of_a_real_camera_are_filled_and_smoothed_before_the_contour():
+    rng = np.random.default_rng(0)
+    background = np.full((200, 200), 0.75, np.float32)
+    depth = background + rng.normal(0.0, 0.002, background.shape).astype(np.float32)
+    depth[50:150, 50:150] -= 0.02
+    depth[45:56, 90:101] = np.nan  # a hole across the top border
+    depth[120:126, 145:151] = 0.0  # and one on the right border
+    raw = segment_depth(depth, background)
+    (clean,) = segment_depth(depth, background, SegmentationParams(**REAL_CAMERA_FILTERS))
+    assert clean.area_px == pytest.approx(100 * 100, rel=0.05)  # the blur widens a 20 mm step by ~1 px a side
+    hull = cv2.contourArea(cv2.convexHull(clean.contour))
+    assert cv2.contourArea(clean.contour) / hull > 0.97  # no notches left by the holes
+    assert sum(b.area_px for b in raw) < clean.area_px
+    for bad in (dict(median_px=4), dict(blur_px=-1.0), dict(fill_invalid_px=-1)):
+        with pytest.raises(ValueError):
+            SegmentationParams(**bad)
 
 
 def test_empty_frames_give_no_blobs():

@@ -22,9 +22,10 @@ def _bag_messages(path):
 
 
 def test_woody_run_leaves_bag_table_and_report(tmp_path):
+    """Run in a namespace, as one of several lines in a domain would: everything lives under it."""
     out = tmp_path / "run"
     result = subprocess.run([entry_point("woody"), "run", "--fillets", "3", "--k", "0", "100", "--seed", "3",
-                             "--out", str(out)], capture_output=True, text=True, timeout=300)
+                             "--out", str(out), "--namespace", "line2"], capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr[-3000:]
     rows = list(csv.DictReader((out / "verdicts.csv").open()))
     assert len(rows) == 3 and {r["lane"] for r in rows} == {"0", "1", "2"}
@@ -38,9 +39,14 @@ def test_woody_run_leaves_bag_table_and_report(tmp_path):
     summary = _bag_messages(out / "line.mcap")
     assert summary["complete"], summary
     counts = {topic: info["count"] for topic, info in summary["topics"].items()}
-    assert counts["/grading/verdicts"] == 3 and counts["/line/ground_truth"] == 3
-    assert counts["/top_camera/depth/image_raw"] > 30 and counts["/clock"] > 100
+    assert all(topic.startswith("/line2/") for topic in counts), sorted(counts)
+    assert counts["/line2/grading/verdicts"] == 3 and counts["/line2/line/ground_truth"] == 3
+    assert counts["/line2/top_camera/depth/image_raw"] > 30 and counts["/line2/clock"] > 100
     assert "fillet_id" in result.stdout and str(out / "line.mcap") in result.stdout
+    report = subprocess.run([entry_point("woody"), "report", str(out / "line.mcap"), "--out", str(tmp_path / "again")],
+                            capture_output=True, text=True, timeout=120)
+    assert report.returncode == 0, report.stderr  # the namespaced bag's verdicts and ground truth are found
+    assert len((tmp_path / "again" / "verdicts.csv").read_text().splitlines()) == 4
 
 
 def test_a_dying_node_stops_the_run_and_the_bag_is_finalised(tmp_path):

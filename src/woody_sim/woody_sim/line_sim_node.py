@@ -16,7 +16,9 @@ import numpy as np
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
@@ -30,10 +32,14 @@ from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.pacing import LeadLimiter
 from woody_sim.ros_params import declare, run_node
 from woody_sim.side_gate import SideFrameGate
+from woody_sim.sensor_model import sensor_preset, to_message_array
 from woody_sim.spawn_schedule import SpawnSchedule
 
+WORLD_FRAME = "world"
 TOP_FRAME = "top_camera_optical_frame"
 SIDE_FRAME = "side_camera_optical_frame"
+SENSOR_STREAM = 11
+"""Second seed word of the camera error model's random stream (the first is the node's ``seed``)."""
 CLOCK_PERIOD = 0.005
 """Sim seconds between /clock messages (200 Hz) besides one per camera frame."""
 
@@ -79,6 +85,9 @@ class LineSim(Node):
                            0.0, 10.0)
         self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
                                         "subscribers listen to the top depth image.", 0, 100)
+        self.sensor = sensor_preset(declare(self, "sensor", "ideal", "Top RGB-D camera error model: ideal, stereo "
+                                            "or structured_light (docs/sensors.md)."))
+        self.sensor_rng = np.random.default_rng([seed, SENSOR_STREAM])
         if not self.k_values or not all(0 <= k < float("inf") for k in self.k_values):
             raise ValueError(f"k_values must be a non-empty list of finite values >= 0, got {self.k_values}")
         if side_lane >= lanes:
@@ -106,25 +115,29 @@ class LineSim(Node):
         latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         camera_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
-        self.truth_pub = self.create_publisher(FilletSpawn, "/line/ground_truth", latched)
-        self.color_pub = self.create_publisher(Image, "/top_camera/color/image_raw", camera_qos)
-        self.depth_pub = self.create_publisher(Image, "/top_camera/depth/image_raw", camera_qos)
-        self.color_info_pub = self.create_publisher(CameraInfo, "/top_camera/color/camera_info", camera_qos)
-        self.depth_info_pub = self.create_publisher(CameraInfo, "/top_camera/depth/camera_info", camera_qos)
-        self.side_pub = self.create_publisher(Image, "/side_camera/image_raw", camera_qos)
-        self.side_info_pub = self.create_publisher(CameraInfo, "/side_camera/camera_info", camera_qos)
+        self.truth_pub = self.create_publisher(FilletSpawn, "line/ground_truth", latched)
+        self.color_pub = self.create_publisher(Image, "top_camera/color/image_raw", camera_qos)
+        self.depth_pub = self.create_publisher(Image, "top_camera/depth/image_raw", camera_qos)
+        self.color_info_pub = self.create_publisher(CameraInfo, "top_camera/color/camera_info", camera_qos)
+        self.depth_info_pub = self.create_publisher(CameraInfo, "top_camera/depth/camera_info", camera_qos)
+        self.side_pub = self.create_publisher(Image, "side_camera/image_raw", camera_qos)
+        self.side_info_pub = self.create_publisher(CameraInfo, "side_camera/camera_info", camera_qos)
         self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
         self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
-        self.create_service(SpawnFillet, "/spawn_fillet", self.on_spawn_request)
+        self.create_service(SpawnFillet, "spawn_fillet", self.on_spawn_request)
+        self.pose_pubs = [self.create_publisher(PoseStamped, f"{name}/pose", latched)
+                          for name in ("top_camera", "side_camera")]
+        for publisher, camera in zip(self.pose_pubs, (self.geometry.top_camera(), self.geometry.side_camera())):
+            publisher.publish(_camera_pose(camera))
         self.pacer = LeadLimiter(max_lead) if max_lead > 0 else None
         if self.pacer is not None:
-            self.create_subscription(FilletTrackArray, "/vision/tracks",
+            self.create_subscription(FilletTrackArray, "vision/tracks",
                                      lambda m: self.pacer.ack(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9),
                                      QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
         self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
             f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
             f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
-            f"side {side_rate:g} Hz on lane {self.geometry.watched_lane}")
+            f"side {side_rate:g} Hz on lane {self.geometry.watched_lane}, top camera model {self.sensor.name}")
 
     # ------------------------------------------------------------------ spawning
 
@@ -136,7 +149,7 @@ class LineSim(Node):
                           damping=float(self.world.config.damping), mass=float(mass), line_speed=float(speed),
                           segments=model.n_segments, length=float(mesh.length), width=float(mesh.width),
                           thickness=float(mesh.thickness))
-        msg.header = self._header("world")
+        msg.header = self._header(WORLD_FRAME)
         msg.position.x, msg.position.y = float(self.geometry.spawn_x), float(self.geometry.lane_y(lane))
         self.truth_pub.publish(msg)
         self.spawned += 1
@@ -179,10 +192,11 @@ class LineSim(Node):
         self.clock_pub.publish(msg)
 
     def _publish_frames(self, frames, stamp: float) -> None:
-        if frames.top_rgb is not None:
+        if frames.top_rgb is not None and not self.sensor.drop(self.sensor_rng):
             header = self._header(TOP_FRAME, stamp)
-            self.color_pub.publish(_image(frames.top_rgb, "rgb8", header))
-            self.depth_pub.publish(_image(frames.top_depth, "32FC1", header))
+            depth = to_message_array(self.sensor.depth(frames.top_depth, self.sensor_rng), self.sensor.encoding)
+            self.color_pub.publish(_image(self.sensor.color(frames.top_rgb, self.sensor_rng), "rgb8", header))
+            self.depth_pub.publish(_image(depth, self.sensor.encoding, header))
             self.top_info.header = header
             self.color_info_pub.publish(self.top_info)
             self.depth_info_pub.publish(self.top_info)
@@ -276,12 +290,26 @@ class LineSim(Node):
 
 
 def _image(array: np.ndarray, encoding: str, header: Header) -> Image:
-    """A sensor_msgs/Image (REP 118 encodings rgb8 / 32FC1) from a contiguous numpy array."""
+    """A sensor_msgs/Image (REP 118 encodings rgb8 / 32FC1 / 16UC1) from a contiguous numpy array."""
     array = np.ascontiguousarray(array)
     msg = Image(header=header, height=array.shape[0], width=array.shape[1], encoding=encoding, is_bigendian=0,
                 step=array.strides[0])
     msg.data = array.tobytes()
     return msg
+
+
+def _camera_pose(camera) -> PoseStamped:
+    """The camera's optical frame in the world frame (x downstream, z up, the roller edge at x = 0).
+
+    Published latched instead of on /tf: tf2_msgs has no PyPI wheel (README, "Real camera").
+    """
+    pose = PoseStamped()
+    pose.header.frame_id = WORLD_FRAME
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(c) for c in camera.position)
+    x, y, z, w = Rotation.from_matrix(np.asarray(camera.rotation, dtype=float)).as_quat()
+    pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z, pose.pose.orientation.w = (
+        float(x), float(y), float(z), float(w))
+    return pose
 
 
 def _camera_info(camera, frame_id: str) -> CameraInfo:

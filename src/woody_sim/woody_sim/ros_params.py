@@ -2,7 +2,8 @@
 
 Each parameter is declared with a description and, for numbers, a range, so
 `--ros-args -p name:=value` outside the range is refused by rclpy with the
-reason; `run_node` turns that refusal (or any ValueError a node raises while
+reason (a whole number given for a decimal parameter is taken as that decimal);
+`run_node` turns that refusal (or any ValueError a node raises while
 reading its parameters) into one clear line and a non-zero exit instead of a
 traceback, and shuts the node down cleanly on Ctrl-C / SIGTERM (summary line, exit 0).
 """
@@ -28,7 +29,30 @@ def declare(node, name: str, default, description: str, low: float | None = None
             descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
         else:
             descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high))]
-    return _typed(name, default, node.declare_parameter(name, default, descriptor).value)
+    from rclpy.exceptions import InvalidParameterTypeException
+
+    try:
+        value = node.declare_parameter(name, default, descriptor).value
+    except InvalidParameterTypeException:
+        whole = _whole_number_override(node, name, default)
+        if whole is None:
+            raise
+        value = node.declare_parameter(name, whole, descriptor, ignore_override=True).value
+    return _typed(name, default, value)
+
+
+def _whole_number_override(node, name: str, default):
+    """A whole-number override of a decimal parameter (``-p speed:=130``) as a float (or float list), else None."""
+    if not (isinstance(default, float) or (isinstance(default, list) and all(isinstance(v, float) for v in default))):
+        return None
+    probe = node.declare_parameter(name, default, ParameterDescriptor(dynamic_typing=True)).value
+    node.undeclare_parameter(name)
+    if isinstance(default, float) and isinstance(probe, int) and not isinstance(probe, bool):
+        return float(probe)
+    if isinstance(default, list) and isinstance(probe, (list, tuple)) and all(
+            isinstance(v, int) and not isinstance(v, bool) for v in probe):
+        return [float(v) for v in probe]
+    return None
 
 
 def _typed(name: str, default, value):

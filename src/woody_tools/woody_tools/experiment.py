@@ -27,6 +27,7 @@ pybullet world is rebuilt per run (cheap) so every run starts identically.
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,9 +37,10 @@ from woody_sim.line_geometry import LineGeometry, fpm_to_mps, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
 from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer
+from woody_sim.sensor_model import sensor_preset
 from woody_vision.camera_model import LaneLayout
 from woody_vision.grader_core import FilletGrader, TrackObservation
-from woody_vision.segmentation import BackgroundModel, segment_depth
+from woody_vision.segmentation import REAL_CAMERA_FILTERS, BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.side_view import SidePassageTracker
 from woody_vision.tracking import CentroidTracker
 
@@ -57,6 +59,9 @@ SIDE_DONE_DISTANCE = 0.12
 """The side passage is closed once the watched fillet's centre of mass is below the axle and this far (m) from it:
 the centroid only moves away from the axle from then on (it falls), so no later frame can lower the MDM."""
 MAX_SIM_S = 4.0
+REAL_CAMERA_SEGMENTATION = SegmentationParams(**REAL_CAMERA_FILTERS)
+BACKGROUND_FRAMES = 5
+"""Noisy empty-belt frames the background is learned from (the segmenter's default ``background_frames``)."""
 
 _RENDERERS: dict[tuple[LineGeometry, bool, bool], tuple[LineRenderer, np.ndarray | None, np.ndarray | None]] = {}
 
@@ -85,6 +90,8 @@ class RunSpec:
         if self.friction_static is not None:
             out.update(friction_static=self.friction_static, friction_dynamic=0.75 * self.friction_static)
         return out
+    sensor: str = "ideal"
+    """Top camera error model (woody_sim.sensor_model preset), seeded per run."""
 
     @property
     def key(self) -> tuple[str, float, float, float | None]:
@@ -127,8 +134,11 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
             layout = LaneLayout(tuple(top_cam.k.reshape(-1)), geometry.top_height, spec.lanes, geometry.lane_pitch)
             grader = FilletGrader(geometry.top_edge_row(), watched_lane=None)
             tracker = CentroidTracker(lane_layout=layout)
-            background = BackgroundModel(1)
-            background.add(top_bg)
+            camera, camera_rng = sensor_preset(spec.sensor), np.random.default_rng(_sensor_seed(spec))
+            background = BackgroundModel(1 if camera.ideal else BACKGROUND_FRAMES)
+            segmentation = SegmentationParams() if camera.ideal else REAL_CAMERA_SEGMENTATION
+            while not background.ready:
+                background.add(camera.depth(top_bg, camera_rng))
         if spec.side:
             side = SidePassageTracker(axle_px=geometry.side_axle_pixel(),
                                       roller_radius_px=geometry.side_roller_radius_px(), background=side_bg)
@@ -154,12 +164,14 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                     poses = world.segment_poses()
                     _, depth = renderer.render_top(poses)
                     n_top += 1
-                    update = tracker.update(segment_depth(depth, background.depth))
-                    observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen)
-                                    for t in update.active]
-                    for graded in grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
-                        results.setdefault(graded.lane, _shape_row(graded))
-                    top_done = len(results) >= spec.lanes
+                    if not camera.drop(camera_rng):
+                        noisy = camera.depth(depth, camera_rng)
+                        update = tracker.update(segment_depth(noisy, background.depth, segmentation))
+                        observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen)
+                                        for t in update.active]
+                        for graded in grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
+                            results.setdefault(graded.lane, _shape_row(graded))
+                        top_done = len(results) >= spec.lanes
             if spec.side and side_result is None and now + 1e-9 >= next_side:
                 gone = watched_fid not in world.fillets
                 near = gone or world.is_dynamic(watched_fid)
@@ -197,6 +209,11 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                 row.update(status="unscored", reason="no side-view measurement")
         rows.append(row)
     return rows
+
+
+def _sensor_seed(spec: RunSpec) -> int:
+    """The camera model's seed for a run: fixed by the run itself, so results do not depend on job order."""
+    return zlib.crc32(f"{spec.mesh}|{spec.k:g}|{spec.speed_fpm:g}|{spec.sensor}".encode())
 
 
 def _shape_row(graded) -> dict:

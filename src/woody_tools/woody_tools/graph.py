@@ -108,6 +108,20 @@ def write_params_file(path: Path, params: dict[str, object]) -> Path:
     return path
 
 
+def namespace_args(namespace: str) -> list[str]:
+    """``-r`` rules that move a node into ``namespace`` with its own sim clock ("" = none).
+
+    The nodes' topic names are relative (REP 135), so ``__ns`` moves them all;
+    ``/clock`` is absolute by ROS convention (every ``use_sim_time`` node listens
+    to it), so each namespaced line gets ``<ns>/clock`` and two simulated lines
+    in one domain do not drive each other's time.
+    """
+    if not namespace:
+        return []
+    ns = "/" + namespace.strip("/")
+    return ["-r", f"__ns:={ns}", "-r", f"/clock:={ns}/clock"]
+
+
 class NodeProcess:
     """One entry point running as a child process, its output going to a log file."""
 
@@ -120,6 +134,7 @@ class NodeProcess:
         log_dir: Path,
         extra_args: Sequence[str] = (),
         env: dict[str, str] | None = None,
+        namespace: str = "",
     ) -> None:
         self.name = name
         self.log_path = Path(log_dir) / f"{name}.log"
@@ -131,6 +146,8 @@ class NodeProcess:
         if params:
             params_file = write_params_file(self.log_path.with_suffix(".params.yaml"), params)
             cmd += ["--ros-args", "--params-file", str(params_file)]
+        if namespace:
+            cmd += ["--ros-args", *namespace_args(namespace)]
         self.command = cmd
         self._log = open(self.log_path, "w")
         self._sent: set[int] = set()

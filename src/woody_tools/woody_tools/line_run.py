@@ -13,6 +13,7 @@ import fcntl
 import json
 import math
 import os
+import re
 import signal
 import sys
 import time
@@ -21,9 +22,11 @@ from pathlib import Path
 
 from woody_common.calibration import DEFAULT_PATH as CALIBRATION_PATH
 from woody_sim.line_geometry import SPEED_RANGE_FPM, TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
+from woody_sim.sensor_model import PRESETS
 from woody_tools.cpu_usage import CpuAccounting
 from woody_tools.graph import DomainInUse, NodeProcess, lease_domain
 from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
+from woody_vision.segmentation import REAL_CAMERA_FILTERS
 
 MAX_LEAD_S = 0.1
 """line_sim runs at most this far (sim s, 3 top frames) ahead of the segmenter, whose queue holds 5 frames."""
@@ -51,6 +54,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="calibration file given to line_sim and the grader as a ROS params file "
                              "(default config/calibration.yaml)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
+    parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
+                        help="top camera error model (docs/sensors.md); default ideal")
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="run the line under NS (topics NS/..., sim clock NS/clock), so several lines share a "
+                             "ROS domain; default: the root namespace")
     parser.add_argument("--force", action="store_true", help="overwrite a run already in --out")
     parser.add_argument("--share-domain", action="store_true",
                         help="run on an exported ROS_DOMAIN_ID even when another woody run holds it (they mix)")
@@ -70,6 +78,8 @@ def _validate(args: argparse.Namespace) -> None:
         raise RunRefused(f"--fillets must be >= 1, got {args.fillets}")
     if not all(0 <= k < math.inf for k in args.k):
         raise RunRefused(f"--k values must be finite and >= 0, got {' '.join(f'{k:g}' for k in args.k)}")
+    if args.namespace and not re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", args.namespace):
+        raise RunRefused(f"--namespace must be a ROS name like /line2, got '{args.namespace}'")
 
 
 def _claim_out(out: Path, force: bool):
@@ -115,7 +125,7 @@ def _check_meshes(spec: str) -> list[str]:
 class LineMonitor:
     """This process's view of the line: ground truth, verdicts, gate commands and sim time."""
 
-    def __init__(self, domain_id: int) -> None:
+    def __init__(self, domain_id: int, namespace: str = "") -> None:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -126,7 +136,8 @@ class LineMonitor:
         self.domain_id = domain_id
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("woody_run_monitor", context=self.context)
+        self.node = rclpy.create_node("woody_run_monitor", context=self.context,
+                                      namespace="/" + namespace.strip("/"))
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
@@ -136,10 +147,10 @@ class LineMonitor:
         self.verdicts: list[Verdict] = []
         self.gate_commands = 0
         self.sim_time = 0.0
-        self.node.create_subscription(FilletSpawn, "/line/ground_truth", self._on_spawn, latched)
-        self.node.create_subscription(FilletVerdict, "/grading/verdicts", self._on_verdict, reliable)
-        self.node.create_subscription(GateCommand, "/reject_gate/commands", self._on_gate, reliable)
-        self.node.create_subscription(Clock, "/clock", self._on_clock, 10)
+        self.node.create_subscription(FilletSpawn, "line/ground_truth", self._on_spawn, latched)
+        self.node.create_subscription(FilletVerdict, "grading/verdicts", self._on_verdict, reliable)
+        self.node.create_subscription(GateCommand, "reject_gate/commands", self._on_gate, reliable)
+        self.node.create_subscription(Clock, "clock" if namespace.strip("/") else "/clock", self._on_clock, 10)
 
     def _on_spawn(self, msg) -> None:
         self.spawns.append(Spawn(sim_id=msg.fillet_id, lane=msg.lane, mesh=msg.mesh, k=msg.stiffness, mass=msg.mass,
@@ -186,7 +197,8 @@ def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, obj
             "stiffness mix k": ", ".join(f"{k:g}" for k in args.k), "meshes": args.meshes, "seed": args.seed,
             "fillets requested": fillets or f"{args.duration:g} s of spawning",
             "threshold": "grader default" if args.threshold is None else args.threshold,
-            "side camera (Hz)": args.side_rate, "paced to wall clock": args.realtime}
+            "side camera (Hz)": args.side_rate, "paced to wall clock": args.realtime, "top camera model": args.sensor,
+            "top camera geometry": args.top_camera, "namespace": args.namespace or "/"}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -209,7 +221,7 @@ def _run_checked(args: argparse.Namespace) -> int:
         raise RunRefused(str(exc)) from None
     monitor = None
     try:
-        monitor = LineMonitor(lease.domain_id)
+        monitor = LineMonitor(lease.domain_id, args.namespace)
         if lease.exported and not args.share_domain:
             _refuse_foreign_nodes(monitor, lease.domain_id)
         lock = _claim_out(out, args.force)
@@ -241,23 +253,31 @@ def _start_nodes(args: argparse.Namespace, fillets: int | None, out: Path, domai
         "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
         "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
         "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
-        "max_lead_s": MAX_LEAD_S, "top_camera": args.top_camera,
+        "max_lead_s": MAX_LEAD_S, "top_camera": args.top_camera, "sensor": args.sensor,
     }
     camera_height = LineGeometry(**top_camera_preset(args.top_camera)).top_height
     vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes, "camera_height_m": camera_height}
+    segmenter_params = dict(vision_params, **({} if args.sensor == "ideal" else REAL_CAMERA_FILTERS))
     grader_params = dict(vision_params)
     if args.threshold is not None:
         grader_params["threshold"] = args.threshold
     settings = json.dumps(run_settings(args, fillets))
     nodes: list[NodeProcess] = []
     for name, params in (("recorder", {"use_sim_time": True, "output": str(out / "line.mcap"),
-                                       "run_settings": settings}),
-                         ("segmenter", vision_params), ("grader", grader_params),
+                                       "run_settings": settings, **_recorded(args.namespace)}),
+                         ("segmenter", segmenter_params), ("grader", grader_params),
                          ("reject_gate", {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm}),
                          ("line_sim", sim_params)):
         calibration = ("--ros-args", "--params-file", args.calibration) if name in ("line_sim", "grader") else ()
-        nodes.append(NodeProcess(name, params, domain_id=domain_id, log_dir=out / "logs", extra_args=calibration))
+        nodes.append(NodeProcess(name, params, domain_id=domain_id, log_dir=out / "logs", extra_args=calibration,
+                                 namespace=args.namespace))
     return nodes
+
+
+def _recorded(namespace: str) -> dict[str, str]:
+    """Recorder parameters that keep a namespaced line's bag to its own topics (and clock)."""
+    ns = namespace.strip("/")
+    return {"topic_regex": f"^/{ns}/"} if ns else {}
 
 
 def _stop_nodes(nodes: list[NodeProcess]) -> None:

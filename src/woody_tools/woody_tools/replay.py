@@ -19,6 +19,10 @@ calls them). Behaviour:
 - Before playing it waits up to ``--wait-for-subscribers`` seconds until every
   publisher has a subscriber, then ``--start-delay`` seconds more.
 - ``--loop`` starts over after the last message (sim time then jumps back).
+- Into a running graph: topics that live nodes already publish (found in the
+  first ``--discovery`` seconds) are skipped with one warning line, so the
+  graph's outputs are not doubled (``--keep-live`` plays them anyway);
+  ``--exclude`` drops topics by name; ``--namespace NS`` plays under NS.
 
 Exit codes: 0 when the bag (or its readable part) was played or the replay was
 stopped by SIGINT/SIGTERM; 2 with one line on stderr, no traceback, when the
@@ -61,6 +65,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--progress", type=float, default=5.0, metavar="S",
                         help="print progress every S seconds (0 = never); default 5")
     parser.add_argument("--quiet", action="store_true", help="print only warnings and errors")
+    parser.add_argument("--exclude", nargs="+", default=[], metavar="TOPIC", help="never replay these topics")
+    parser.add_argument("--keep-live", action="store_true",
+                        help="also replay topics that live nodes already publish (default: skip them, with a warning)")
+    parser.add_argument("--discovery", type=float, default=3.0, metavar="S",
+                        help="look for live publishers of the bag's topics for up to S seconds (less once the graph "
+                             "is seen and settled); default 3")
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="publish under NS: the bag's /a/b as NS/a/b and /clock as NS/clock, like the nodes of "
+                             "`woody run --namespace NS`")
 
 
 class _Stop:
@@ -104,8 +117,8 @@ def run(args: argparse.Namespace) -> int:
     """Play the bag; see the module docstring for options and exit codes."""
     if not args.rate > 0:
         return _fail(f"--rate must be > 0 (got {args.rate})")
-    if args.start_delay < 0 or args.wait_for_subscribers < 0 or args.clock_rate <= 0:
-        return _fail("--start-delay and --wait-for-subscribers must be >= 0, --clock-rate > 0")
+    if args.start_delay < 0 or args.wait_for_subscribers < 0 or args.discovery < 0 or args.clock_rate <= 0:
+        return _fail("--start-delay, --wait-for-subscribers and --discovery must be >= 0, --clock-rate > 0")
     try:
         info = bag_summary(args.bag)
     except BagError as exc:
@@ -122,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
             return _fail(f"{path}: holds none of {' '.join(requested)} (it has {' '.join(sorted(in_bag))})")
         if missing:
             print(f"replay: {path}: not in the bag, skipped: {' '.join(missing)}", file=sys.stderr)
-    selected = [t for t in (requested or sorted(in_bag)) if t in in_bag and t != CLOCK]
+    excluded = {t if t.startswith("/") else "/" + t for t in args.exclude}
+    selected = [t for t in (requested or sorted(in_bag)) if t in in_bag and t != CLOCK and t not in excluded]
     types: dict[str, type] = {}
     for topic in selected:
         try:
@@ -155,6 +169,10 @@ def run(args: argparse.Namespace) -> int:
         rclpy.init(args=["woody_replay"], context=context, signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node("woody_replay", context=context)
         try:
+            if not args.keep_live:
+                clock_mode = _skip_live(node, args, types, clock_mode, stop)
+            if not types and clock_mode is None:
+                return _fail(f"{path}: nothing left to play (live nodes publish every selected topic)")
             player = _Player(node, args, path, info, types, clock_mode, stop)
             return player.play()
         finally:
@@ -168,6 +186,48 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(sig, handler)
 
 
+def _skip_live(node, args, types: dict[str, type], clock_mode: str | None, stop: _Stop) -> str | None:
+    """Drop from ``types`` the topics live nodes already publish; the clock mode left (None if /clock is live).
+
+    Replaying a bag's tracks or verdicts into a running graph would double its
+    outputs (and a second /clock would fight the live one), so those topics are
+    skipped with one warning line naming the nodes; ``--keep-live`` plays them anyway.
+    """
+    _discover(node, args.discovery, stop)
+    topics = [*types, *([CLOCK] if clock_mode else [])]
+    live = {}
+    for topic in topics:
+        nodes = sorted({i.node_name for i in node.get_publishers_info_by_topic(moved(topic, args.namespace))})
+        if nodes:
+            live[topic] = nodes
+    for topic in live:
+        types.pop(topic, None)
+    if live:
+        print("replay: not replaying topics live nodes publish (--keep-live plays them anyway): "
+              + ", ".join(f"{t} (by {' '.join(n)})" for t, n in live.items()), file=sys.stderr, flush=True)
+    return None if CLOCK in live else clock_mode
+
+
+def _discover(node, limit: float, stop: _Stop, settle: float = 0.5) -> None:
+    """Wait until other nodes have been seen and the set of nodes has not changed for ``settle`` s (or ``limit``)."""
+    deadline = time.monotonic() + limit
+    seen: set = set()
+    changed = time.monotonic()
+    while not stop and time.monotonic() < deadline:
+        names = {n for n in node.get_node_names_and_namespaces() if n[0] != node.get_name()}
+        if names != seen:
+            seen, changed = names, time.monotonic()
+        elif seen and time.monotonic() - changed >= settle:
+            return
+        stop.event.wait(0.1)
+
+
+def moved(topic: str, namespace: str) -> str:
+    """A recorded (absolute) topic name moved under ``namespace`` ("" = unchanged)."""
+    ns = namespace.strip("/")
+    return f"/{ns}{topic}" if ns else topic
+
+
 class _Player:
     def __init__(self, node, args, path: str, info: dict, types: dict[str, type], clock_mode: str | None,
                  stop: _Stop) -> None:
@@ -176,12 +236,13 @@ class _Player:
 
         self.node, self.args, self.path, self.info, self.stop = node, args, path, info, stop
         self.clock_mode = clock_mode
-        self.publishers = {topic: node.create_publisher(cls, topic, _qos_for(info["topics"][topic]["qos"]))
+        self.publishers = {topic: node.create_publisher(cls, moved(topic, args.namespace),
+                                                        _qos_for(info["topics"][topic]["qos"]))
                            for topic, cls in types.items()}
         self.clock_publisher = None
         if clock_mode is not None:
             self.clock_publisher = node.create_publisher(
-                Clock, CLOCK, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+                Clock, moved(CLOCK, args.namespace), QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self._clock_msg = Clock()
         self._last_clock = -1
         self.topics = list(types) + ([CLOCK] if clock_mode == "recorded" else [])

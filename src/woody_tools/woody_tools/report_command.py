@@ -18,16 +18,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def rows_from_bag(path: Path, woody_k: float = 50.0) -> tuple[list[dict], str | None]:
-    """Ground truth and verdicts recorded in a bag, joined into verdict-table rows, and where a
-    truncated bag ends (None for a complete one): the readable part of a cut recording still counts."""
+    """Ground truth and verdicts recorded in a bag (of a line in any namespace), joined into verdict-table rows,
+    and where a truncated bag ends (None for a complete one): the readable part of a cut recording still counts."""
     from woody_tools.line_run import verdict_from_msg
-    from woody_tools.mcap_io import BagError, decode, read_bag
+    from woody_tools.mcap_io import BagError, bag_topics, decode, read_bag
 
     spawns, verdicts, ended = [], [], None
     try:
-        for topic, type_name, data, _log_time in read_bag(path, topics=["/line/ground_truth", "/grading/verdicts"]):
+        topics = [t for t in bag_topics(path) if t.endswith(("/line/ground_truth", "/grading/verdicts"))]
+        for topic, type_name, data, _log_time in read_bag(path, topics=topics):
             msg = decode(type_name, data)
-            if topic == "/line/ground_truth":
+            if topic.endswith("/line/ground_truth"):
                 spawns.append(Spawn(sim_id=msg.fillet_id, lane=msg.lane, mesh=msg.mesh, k=msg.stiffness,
                                     mass=msg.mass, line_speed=msg.line_speed,
                                     stamp=msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,

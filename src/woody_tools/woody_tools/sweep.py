@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
+from woody_sim.sensor_model import PRESETS
 from woody_tools.experiment import RUN_COLUMNS, RunSpec
 
 TOP_K = (0.0, 20.0, 40.0, 60.0, 80.0, 100.0)
@@ -63,6 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mass", type=float, default=None,
                         help="total chain mass M in kg (default: the calibrated one, config/calibration.yaml)")
     parser.add_argument("--no-side", action="store_true", help="skip the side view (top-down Φ only)")
+    parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
+                        help="top camera error model (docs/sensors.md); use its own --out; default ideal")
     parser.add_argument("--no-report", action="store_true", help="only run; do not rebuild results.md and plots")
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
@@ -200,9 +203,10 @@ def run_grid(runs: list[RunSpec], mesh_spec: str, jobs: int, csv_path: Path, des
 
 
 def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
-         side: bool = True, top_camera: str = "default") -> list[RunSpec]:
+         side: bool = True, top_camera: str = "default", sensor: str = "ideal") -> list[RunSpec]:
     """Runs ordered so that partial results already span the grid (k and speed vary fastest)."""
-    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side, top_camera=top_camera)
+    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side, top_camera=top_camera,
+                    sensor=sensor)
             for name in mesh_names for speed in speeds for k in ks]
 
 
@@ -230,7 +234,8 @@ def run(args: argparse.Namespace) -> int:
               f"--top-camera {args.top_camera}", file=sys.stderr)
         return 2
     done = completed_runs(csv_path, args.lanes, out if args.traces else None)
-    runs = plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, top_camera=args.top_camera)
+    runs = plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, top_camera=args.top_camera,
+                sensor=args.sensor)
     todo = [r for r in runs if _key(r.mesh, r.k, r.speed_fpm, mass) not in done]
     print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds = {len(runs)} runs "
           f"({len(runs) - len(todo)} already in {csv_path}, {len(todo)} to go), {args.lanes} lanes, "
@@ -296,4 +301,6 @@ def _argv(args: argparse.Namespace) -> list[str]:
         out += ["--top-camera", args.top_camera]
     if args.traces:
         out.append("--traces")
+    if args.sensor != "ideal":
+        out += ["--sensor", args.sensor]
     return out

@@ -47,8 +47,8 @@ def measure_verdict_latency(seconds: float = 10.0, lanes: int = 3, seed: int = 3
         executor.add_node(node)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         clock_pub = node.create_publisher(Clock, "/clock", 10)
-        depth_pub = node.create_publisher(Image, "/top_camera/depth/image_raw", qos)
-        info_pub = node.create_publisher(CameraInfo, "/top_camera/depth/camera_info", qos)
+        depth_pub = node.create_publisher(Image, "top_camera/depth/image_raw", qos)
+        info_pub = node.create_publisher(CameraInfo, "top_camera/depth/camera_info", qos)
 
         def on_verdict(msg: FilletVerdict) -> None:
             if msg.classification == FilletVerdict.CLASS_UNSCORED:
@@ -59,7 +59,7 @@ def measure_verdict_latency(seconds: float = 10.0, lanes: int = 3, seed: int = 3
 
         # Verdicts are timestamped by their own executor thread, so drawing the next frame never delays them.
         listener = rclpy.create_node("bench_latency_listener", context=context)
-        listener.create_subscription(FilletVerdict, "/grading/verdicts", on_verdict, QoSProfile(depth=100))
+        listener.create_subscription(FilletVerdict, "grading/verdicts", on_verdict, QoSProfile(depth=100))
         listen = rclpy.executors.SingleThreadedExecutor(context=context)
         listen.add_node(listener)
         thread = threading.Thread(target=listen.spin, daemon=True)

@@ -17,17 +17,27 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from geometry_msgs.msg import Point
 from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import ImageMarker
 from woody_msgs.msg import FilletTrackArray, FilletVerdict
 
 from woody_sim.ros_params import declare, run_node
 from woody_common.calibration import load_calibration
 from woody_vision.camera_model import edge_row
-from woody_vision.frame_checks import FrameChecker, FrameError, image_to_array
+from woody_vision.frame_checks import FrameChecker, FrameError
+from woody_vision.image_encodings import color_rgb
+from woody_vision.image_qos import declare_image_qos
 from woody_vision.grader_core import FilletGrader, GradedFillet, TrackObservation
 from woody_vision.grading import GradingRules
 from woody_vision.side_view import SidePassageTracker
 
+MARKER_COLOURS = {"pending": ColorRGBA(r=1.0, g=0.85, b=0.0, a=1.0), "normal": ColorRGBA(g=0.8, a=1.0),
+                  "woody": ColorRGBA(r=1.0, a=1.0), "unscored": ColorRGBA(r=0.6, g=0.6, b=0.6, a=1.0)}
+"""Contour colours on the image: yellow until graded, then green normal, red woody, grey unscored."""
+MARKER_LIFETIME_NS = 200_000_000
+"""A marker outlives its frame by a few frames, so a viewer never flickers, and vanishes with the fillet."""
 LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY, "unscored": FilletVerdict.CLASS_UNSCORED}
 
 
@@ -68,14 +78,18 @@ class Grader(Node):
         self.side = SidePassageTracker(**self.side_options) if self.side_enabled else None
         self.side_checker = FrameChecker(self.get_logger())
         self.published = 0
+        markers = declare(self, "publish_markers", True, "Publish grading/markers (visualization_msgs/ImageMarker: "
+                          "each track's contour on the top image, coloured by its verdict) for Foxglove.")
+        self.labels: dict[int, str] = {}
 
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        sensor = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self.verdict_pub = self.create_publisher(FilletVerdict, "/grading/verdicts", reliable)
-        self.create_subscription(CameraInfo, "/top_camera/depth/camera_info", self.on_camera_info, sensor)
-        self.create_subscription(FilletTrackArray, "/vision/tracks", self.on_tracks, QoSProfile(depth=50))
+        sensor = declare_image_qos(self)
+        self.verdict_pub = self.create_publisher(FilletVerdict, "grading/verdicts", reliable)
+        self.marker_pub = self.create_publisher(ImageMarker, "grading/markers", 50) if markers else None
+        self.create_subscription(CameraInfo, "top_camera/depth/camera_info", self.on_camera_info, sensor)
+        self.create_subscription(FilletTrackArray, "vision/tracks", self.on_tracks, QoSProfile(depth=50))
         if self.side is not None:
-            self.create_subscription(Image, "/side_camera/image_raw", self.on_side_image, sensor)
+            self.create_subscription(Image, "side_camera/image_raw", self.on_side_image, sensor)
         self.create_timer(0.1, self.on_timer)
         self.frame_id = ""
 
@@ -96,10 +110,13 @@ class Grader(Node):
         tracks = [TrackObservation(t.id, t.lane, np.frombuffer(t.contour_uv, np.int32).reshape(-1, 2), t.unseen)
                   for t in msg.tracks if len(t.contour_uv) >= 6 and len(t.contour_uv) % 2 == 0]
         self._publish(self.core.on_tracks(_seconds(msg.header.stamp), tracks, msg.ended_ids))
+        if self.marker_pub is not None:
+            for track in tracks:
+                self.marker_pub.publish(self._marker(msg.header, track))
 
     def on_side_image(self, msg: Image) -> None:
         try:
-            rgb = image_to_array(msg, "rgb8")
+            rgb = color_rgb(msg)
             self.side_checker.check(msg, rgb.shape)
         except FrameError as exc:
             self.side_checker.reject(f"side camera: {exc}")
@@ -119,6 +136,20 @@ class Grader(Node):
         for fillet in graded:
             self.verdict_pub.publish(self.to_msg(fillet))
             self.published += 1
+            self.labels[fillet.fillet_id] = fillet.label
+            while len(self.labels) > 200:  # only fillets still in view are drawn
+                self.labels.pop(next(iter(self.labels)))
+
+    def _marker(self, header, track: TrackObservation) -> ImageMarker:
+        """The track's contour as an image annotation: ns says lane and verdict, id is the track id."""
+        label = self.labels.get(track.track_id, "pending")
+        outline = cv2.approxPolyDP(track.contour.reshape(-1, 1, 2), 1.0, True).reshape(-1, 2)
+        marker = ImageMarker(header=header, ns=f"lane{track.lane}/{label}", id=track.track_id,
+                             type=ImageMarker.POLYGON, action=ImageMarker.ADD, scale=2.0,
+                             outline_color=MARKER_COLOURS[label], filled=0)
+        marker.lifetime.nanosec = MARKER_LIFETIME_NS
+        marker.points = [Point(x=float(u), y=float(v)) for u, v in outline]
+        return marker
 
     def to_msg(self, fillet: GradedFillet) -> FilletVerdict:
         shape, side, nan = fillet.shape, fillet.side, math.nan

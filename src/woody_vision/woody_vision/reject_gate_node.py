@@ -44,8 +44,8 @@ class RejectGate(Node):
         self.late = 0
         self.passed = 0
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        self.publisher = self.create_publisher(GateCommand, "/reject_gate/commands", reliable)
-        self.create_subscription(FilletVerdict, "/grading/verdicts", self.on_verdict, reliable)
+        self.publisher = self.create_publisher(GateCommand, "reject_gate/commands", reliable)
+        self.create_subscription(FilletVerdict, "grading/verdicts", self.on_verdict, reliable)
 
     def close(self) -> None:
         print(f"[reject_gate] diverted {self.diverted}, late {self.late}, passed {self.passed}", flush=True)

@@ -29,6 +29,8 @@ background is the floor and the same rim is, so a high threshold makes the outli
 the edge whether it bends or not (5 mm gave stiff real meshes a k-independent Φ of about 2; 2 mm about 1)."""
 DEFAULT_MIN_AREA_PX = 500
 """Blobs smaller than this are noise or slivers, never a fillet (paper: 500 px)."""
+REAL_CAMERA_FILTERS = {"fill_invalid_px": 4, "median_px": 5, "blur_px": 1.0}
+"""The hole filling and smoothing recommended for a real (or modelled) camera (README, "Real camera")."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +59,14 @@ class SegmentationParams:
     """Components less solid (area / hull area) than this are checked for several fillets."""
     core_ratio: float = 0.5
     """Watershed markers: the component's pixels farther than this × its max distance from the border."""
+    fill_invalid_px: int = 0
+    """Pixels without a depth measurement take the mean height of the valid ones within this radius (0 = off):
+    a real camera's holes at a fillet's border would otherwise notch its contour."""
+    median_px: int = 0
+    """Median filter of the height map (0 = off, 3 or 5): a noisy camera's depth would otherwise fray contours."""
+    blur_px: float = 0.0
+    """Gaussian σ (px) smoothing the height map after the median (0 = off): frayed contours lose solidity and
+    would be split as if they were two touching fillets."""
 
     def __post_init__(self) -> None:
         if not self.height_threshold_m > 0.0:
@@ -69,12 +79,15 @@ class SegmentationParams:
             raise ValueError(f"split_solidity must be in (0, 1], got {self.split_solidity}")
         if not 0.0 < self.core_ratio < 1.0:
             raise ValueError(f"core_ratio must be in (0, 1), got {self.core_ratio}")
+        if self.fill_invalid_px < 0 or self.median_px not in (0, 3, 5) or self.blur_px < 0:
+            raise ValueError(f"fill_invalid_px and blur_px must be >= 0 and median_px 0, 3 or 5, got "
+                             f"{self.fill_invalid_px}, {self.blur_px}, {self.median_px}")
 
 
 class BackgroundModel:
     """Empty-belt depth, the per-pixel median of the first ``frames_needed`` frames fed to it.
 
-    Non-finite depths (no return) are ignored in the median; a pixel never seen
+    Non-finite and non-positive depths (no return) are ignored in the median; a pixel never seen
     stays NaN and therefore never rises above the belt in :func:`height_map`.
     Call :meth:`reset` to relearn, e.g. after the camera or belt moved.
     """
@@ -105,7 +118,8 @@ class BackgroundModel:
         frame = np.asarray(depth, dtype=np.float32)
         if self._frames and frame.shape != self._frames[0].shape:
             raise ValueError(f"depth shape changed from {self._frames[0].shape} to {frame.shape}")
-        frame = np.where(np.isfinite(frame), frame, np.float32(np.nan))
+        with np.errstate(invalid="ignore"):
+            frame = np.where(np.isfinite(frame) & (frame > 0.0), frame, np.float32(np.nan))
         self._frames.append(frame)
         if len(self._frames) >= self.frames_needed:
             with warnings.catch_warnings():
@@ -121,9 +135,10 @@ class BackgroundModel:
 
 
 def height_map(depth: np.ndarray, background: np.ndarray) -> np.ndarray:
-    """Height above the learned background in metres (float32); NaN/inf anywhere becomes 0."""
+    """Height above the learned background in metres (float32); NaN/inf anywhere or depth <= 0 (no return) become 0."""
     height = np.subtract(background, depth, dtype=np.float32)
-    height[~np.isfinite(height)] = 0.0
+    with np.errstate(invalid="ignore"):
+        height[~np.isfinite(height) | ~(np.asarray(depth) > 0.0)] = 0.0
     return height
 
 
@@ -131,7 +146,26 @@ def segment_depth(
     depth: np.ndarray, background: np.ndarray, params: SegmentationParams = SegmentationParams()
 ) -> list[Blob]:
     """Segment the fillets in a depth frame against a background depth."""
-    return segment_height_map(height_map(depth, background), params)
+    height = height_map(depth, background)
+    if params.fill_invalid_px:
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(depth) & (depth > 0.0) & np.isfinite(background)
+        height = fill_invalid(height, valid, params.fill_invalid_px)
+    if params.median_px:
+        height = cv2.medianBlur(height, params.median_px)
+    if params.blur_px:
+        height = cv2.GaussianBlur(height, (0, 0), params.blur_px)
+    return segment_height_map(height, params)
+
+
+def fill_invalid(height: np.ndarray, valid: np.ndarray, radius_px: int) -> np.ndarray:
+    """Invalid pixels get the mean height of the valid pixels in a (2r+1)² box around them (0 if there are none)."""
+    size = (2 * radius_px + 1, 2 * radius_px + 1)
+    weights = valid.astype(np.float32)
+    total = cv2.boxFilter(height * weights, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    count = cv2.boxFilter(weights, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    mean = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
+    return np.where(valid, height, mean).astype(np.float32)
 
 
 def segment_height_map(height: np.ndarray, params: SegmentationParams = SegmentationParams()) -> list[Blob]:

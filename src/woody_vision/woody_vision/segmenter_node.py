@@ -14,14 +14,16 @@ import sys
 import cv2
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Empty
 from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 
 from woody_sim.ros_params import declare, run_node
 from woody_vision.camera_model import LaneLayout
-from woody_vision.frame_checks import FrameChecker, FrameError, image_to_array
+from woody_vision.frame_checks import FrameChecker, FrameError
+from woody_vision.image_encodings import color_rgb, depth_metres, match_size
+from woody_vision.image_qos import declare_image_qos
 from woody_vision.segmentation import DEFAULT_HEIGHT_THRESHOLD_M, BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.tracking import CentroidTracker
 
@@ -35,6 +37,12 @@ class Segmenter(Node):
             height_threshold_m=declare(self, "height_threshold_m", DEFAULT_HEIGHT_THRESHOLD_M, "Height above the "
                                        "belt background that counts as fillet (m).", 0.0005, 0.1),
             min_area_px=declare(self, "min_area_px", 500, "Blobs smaller than this are dropped (px).", 1, 100000),
+            fill_invalid_px=declare(self, "fill_invalid_px", 0, "Pixels without depth take the mean height of the "
+                                    "valid ones within this radius (px; 0 = off; 4 for a real camera).", 0, 50),
+            median_px=declare(self, "median_px", 0, "Median filter of the height map: 0 (off), 3 or 5 (a noisy "
+                              "real camera).", 0, 5),
+            blur_px=declare(self, "blur_px", 0.0, "Gaussian sigma smoothing the height map after the median (px; 0 = "
+                            "off; 1.0 for a real camera).", 0.0, 20.0),
         )
         self.lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
         self.lane_pitch = declare(self, "lane_pitch_m", 0.16, "Distance between lane centres (m).", 0.01, 2.0)
@@ -52,22 +60,24 @@ class Segmenter(Node):
         self.checker = FrameChecker(self.get_logger())
         self.latest_color: Image | None = None
         self.scores: dict[int, str] = {}
+        self.info_size: tuple[int, int] | None = None
 
-        sensor = QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE)
-        self.tracks_pub = self.create_publisher(FilletTrackArray, "/vision/tracks", QoSProfile(depth=50))
+        sensor = declare_image_qos(self)
+        self.tracks_pub = self.create_publisher(FilletTrackArray, "vision/tracks", QoSProfile(depth=50))
         self.frames = 0
-        self.debug_pub = self.create_publisher(Image, "/vision/debug_image", 5) if self.publish_debug else None
-        self.create_subscription(CameraInfo, "/top_camera/depth/camera_info", self.on_camera_info, sensor)
-        self.create_subscription(Image, "/top_camera/depth/image_raw", self.on_depth, sensor)
+        self.debug_pub = self.create_publisher(Image, "vision/debug_image", 5) if self.publish_debug else None
+        self.create_subscription(CameraInfo, "top_camera/depth/camera_info", self.on_camera_info, sensor)
+        self.create_subscription(Image, "top_camera/depth/image_raw", self.on_depth, sensor)
         self.create_subscription(Empty, "~/reset_background", self.on_reset, 1)
         if self.publish_debug:
-            self.create_subscription(Image, "/top_camera/color/image_raw", self.on_color, sensor)
-            self.create_subscription(FilletVerdict, "/grading/verdicts", self.on_verdict, 50)
+            self.create_subscription(Image, "top_camera/color/image_raw", self.on_color, sensor)
+            self.create_subscription(FilletVerdict, "grading/verdicts", self.on_verdict, 50)
 
     def on_camera_info(self, info: CameraInfo) -> None:
         if self.tracker is None and info.k[0] > 0:
             layout = LaneLayout(tuple(info.k), self.camera_height, self.lanes, self.lane_pitch)
             self.tracker = CentroidTracker(lane_layout=layout, **self.tracker_options)
+            self.info_size = (info.width, info.height)
             self.get_logger().info(f"calibration received: fx={info.k[0]:.1f}, {info.width}x{info.height}")
 
     def on_reset(self, _msg: Empty) -> None:
@@ -79,15 +89,17 @@ class Segmenter(Node):
         self.latest_color = msg
 
     def on_verdict(self, msg: FilletVerdict) -> None:
-        self.scores[msg.fillet_id] = f"{msg.phi:.1f}"
+        verdict = {FilletVerdict.CLASS_NORMAL: "normal", FilletVerdict.CLASS_WOODY: "woody"}
+        self.scores[msg.fillet_id] = f"phi {msg.phi:.1f} {verdict.get(msg.classification, 'unscored')}"
         while len(self.scores) > 200:  # only fillets still in view need their score
             self.scores.pop(next(iter(self.scores)))
 
     def on_depth(self, msg: Image) -> None:
         self.frames += 1
         try:
-            depth = image_to_array(msg, "32FC1")
+            depth = depth_metres(msg)
             self.checker.check(msg, depth.shape)
+            self._check_calibration_size(msg)
         except FrameError as exc:
             self.checker.reject(str(exc))
             return
@@ -119,11 +131,25 @@ class Segmenter(Node):
         if self.debug_pub is not None:
             self._publish_debug(msg, update.active)
 
-    def _publish_debug(self, depth_msg: Image, tracks) -> None:
+    def _check_calibration_size(self, msg: Image) -> None:
+        """Refuse depth frames of another size than the camera_info their K belongs to."""
+        if self.info_size is not None and self.info_size != (msg.width, msg.height):
+            raise FrameError(f"depth image {msg.width}x{msg.height} does not match its camera_info "
+                             f"{self.info_size[0]}x{self.info_size[1]}: K would be wrong; frame skipped")
+
+    def _debug_canvas(self, depth_msg: Image) -> np.ndarray:
+        """The colour frame of the same stamp at the depth image's size, or black when there is none."""
+        blank = np.zeros((depth_msg.height, depth_msg.width, 3), np.uint8)
         if self.latest_color is None or self.latest_color.header.stamp != depth_msg.header.stamp:
-            canvas = np.zeros((depth_msg.height, depth_msg.width, 3), np.uint8)
-        else:
-            canvas = image_to_array(self.latest_color, "rgb8").copy()
+            return blank
+        try:
+            return match_size(color_rgb(self.latest_color), depth_msg.height, depth_msg.width).copy()
+        except FrameError as exc:
+            self.checker.reject(f"debug image: {exc}")
+            return blank
+
+    def _publish_debug(self, depth_msg: Image, tracks) -> None:
+        canvas = self._debug_canvas(depth_msg)
         for track in tracks:
             colour = (0, 255, 0) if track.unseen == 0 else (255, 160, 0)
             cv2.polylines(canvas, [track.blob.contour.reshape(-1, 1, 2)], True, colour, 1)
