@@ -43,6 +43,7 @@ import multiprocessing as mp
 import multiprocessing.connection as mpc
 import os
 import signal
+import threading
 import time
 import traceback
 import weakref
@@ -597,10 +598,23 @@ class RenderProcess:
             name="woody-render",
             daemon=True,
         )
-        self._proc.start()
+        self._start_ignoring_sigint()
         child_conn.close()
         self._closed = False
         self._finalizer = weakref.finalize(self, RenderProcess._shutdown, self._conn, self._proc)
+
+    def _start_ignoring_sigint(self) -> None:
+        """Start the child with SIGINT ignored from its first instruction: a Ctrl-C that reaches the process
+        group while the child is still importing would otherwise end it in a KeyboardInterrupt traceback
+        (an ignored disposition survives exec, and Python keeps it). The parent's handler is restored."""
+        if threading.current_thread() is not threading.main_thread():
+            self._proc.start()
+            return
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            self._proc.start()
+        finally:
+            signal.signal(signal.SIGINT, previous)
 
     # ---- lifecycle
     @staticmethod
