@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from woody_sim.fillet_model import MIN_STABLE_MASS
+from woody_tools import cluster
 from woody_tools.experiment import RunSpec
 
 CALIBRATION_MESHES = "generated:8:9"
@@ -57,30 +58,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--refine", type=int, default=2, help="refinement rounds around the best mass (default 2)")
     parser.add_argument("--mass", type=float, default=None, help="skip the mass search and use this M")
     parser.add_argument("--skip-threshold", action="store_true", help="calibrate the mass only")
-    parser.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
     parser.add_argument("--out", default="calibration-out", help="folder for calibration.json / calibration.md")
     parser.add_argument("--dry-run", action="store_true", help="print the results, do not change the defaults")
+    cluster.add_arguments(parser, jobs_default=None, probe=False)
 
 
-def _evaluate(runs: list[RunSpec], mesh_spec: str, jobs: int, desc: str) -> list[dict]:
-    import multiprocessing as mp
-
-    from tqdm import tqdm
-
+def _evaluate(runs: list[RunSpec], mesh_spec: str, client, desc: str) -> list[dict]:
+    """The runs' rows, evaluated on the Dask cluster exactly like `woody sweep` evaluates its grid."""
     from woody_tools import sweep
 
-    sweep._MESHES = sweep._load_meshes(mesh_spec)
     rows: list[dict] = []
-    with tqdm(total=len(runs), unit="run", desc=desc, file=sys.stderr, dynamic_ncols=True) as bar:
-        if jobs <= 1:
-            for run in runs:
-                rows += sweep._work(run)
-                bar.update(1)
-        else:
-            with mp.get_context("fork").Pool(jobs, initializer=sweep._worker_init, initargs=(mesh_spec,)) as pool:
-                for r in pool.imap_unordered(sweep._work, runs):
-                    rows += r
-                    bar.update(1)
+    stats = cluster.run_tasks(client, sweep._work, runs, sweep._load_meshes(mesh_spec), rows.extend, desc)
+    for line in stats.failed:
+        print(f"woody calibrate: not computed: {line}", file=sys.stderr)
     return rows
 
 
@@ -92,9 +82,9 @@ def mass_objective(nmdm0: float, nmdm100: float) -> float:
     return abs(nmdm100 - nmdm0 - TARGET_DELTA) + outside
 
 
-def _side_point(mass: float, names: list[str], spec: str, jobs: int) -> dict:
+def _side_point(mass: float, names: list[str], spec: str, client) -> dict:
     runs = [RunSpec(n, k, 100.0, lanes=1, mass=mass, top=False) for n in names for k in (0.0, 100.0)]
-    rows = _evaluate(runs, spec, jobs, f"M={mass:g}")
+    rows = _evaluate(runs, spec, client, f"M={mass:g}")
     n0 = [r["nmdm"] for r in rows if r["k"] == 0.0 and math.isfinite(r.get("nmdm", math.nan))]
     n100 = [r["nmdm"] for r in rows if r["k"] == 100.0 and math.isfinite(r.get("nmdm", math.nan))]
     m0 = float(np.mean(n0)) if n0 else math.nan
@@ -106,8 +96,8 @@ def _side_point(mass: float, names: list[str], spec: str, jobs: int) -> dict:
     return point
 
 
-def search_mass(names: list[str], spec: str, masses: list[float], refine: int, jobs: int) -> tuple[float, list[dict]]:
-    points = [_side_point(m, names, spec, jobs) for m in masses]
+def search_mass(names: list[str], spec: str, masses: list[float], refine: int, client) -> tuple[float, list[dict]]:
+    points = [_side_point(m, names, spec, client) for m in masses]
     for _ in range(refine):
         ordered = sorted(points, key=lambda p: p["mass"])
         best = min(range(len(ordered)), key=lambda i: ordered[i]["objective"])
@@ -115,7 +105,7 @@ def search_mass(names: list[str], spec: str, masses: list[float], refine: int, j
         for j in (best - 1, best + 1):  # geometric midpoints towards both neighbours
             if 0 <= j < len(ordered):
                 new.append(max(MIN_STABLE_MASS, math.sqrt(ordered[best]["mass"] * ordered[j]["mass"])))
-        points += [_side_point(round(m, 2), names, spec, jobs) for m in new]
+        points += [_side_point(round(m, 2), names, spec, client) for m in new]
     best = min(points, key=lambda p: p["objective"])
     return float(best["mass"]), sorted(points, key=lambda p: p["mass"])
 
@@ -135,13 +125,20 @@ def write_default(path: Path, name: str, value: float) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import os
+    jobs = args.jobs or cluster.default_jobs()
+    try:
+        with cluster.connect(args.scheduler, jobs, "woody calibrate") as client:
+            return _calibrate(args, client)
+    except cluster.ClusterUnavailable as exc:
+        print(f"woody calibrate: {exc}", file=sys.stderr)
+        return 2
 
+
+def _calibrate(args: argparse.Namespace, client) -> int:
     from woody_sim import fillet_model
     from woody_tools import results, sweep
     from woody_vision import grading
 
-    jobs = args.jobs or os.cpu_count() or 1
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cal_names = list(sweep._load_meshes(args.meshes))
@@ -165,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
             return 2
         names = cal_names[: max(1, args.mass_meshes)]
         print(f"woody calibrate: mass search on {len(names)} meshes, side view, k 0/100, 100 FPM", file=sys.stderr)
-        mass, points = search_mass(names, args.meshes, masses, args.refine, jobs)
+        mass, points = search_mass(names, args.meshes, masses, args.refine, client)
         report["mass_search"] = points
         best = next(p for p in points if p["mass"] == mass)
         report["mass"] = mass
@@ -180,7 +177,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.skip_threshold:
         runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False) for n in cal_names for s in (100.0, 130.0)
                 for k in (0.0, 100.0)]
-        cal_rows = _evaluate(runs, args.meshes, jobs, "threshold (calibration set)")
+        cal_rows = _evaluate(runs, args.meshes, client, "threshold (calibration set)")
         normal, severe = _phi_split(cal_rows)
         threshold, bacc = results.best_threshold(normal, severe)
         threshold = round(threshold, 2)
@@ -190,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
               f"{len(normal)} normal / {len(severe)} severe calibration fillets)")
         runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False) for n in test_names for s in (100.0, 130.0)
                 for k in (0.0, 100.0)]
-        test_rows = _evaluate(runs, args.test_meshes, jobs, "held-out test set")
+        test_rows = _evaluate(runs, args.test_meshes, client, "held-out test set")
         per = []
         for speed in (100.0, 130.0):
             for lane in (None, 0, 1, 2):

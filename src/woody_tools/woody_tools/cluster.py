@@ -49,16 +49,17 @@ _TASKS: Counter = Counter()
 _LOCK = threading.Lock()
 
 
-def add_arguments(parser: argparse.ArgumentParser, jobs_default: int | None) -> None:
-    """--scheduler, --jobs and --scaling-probe, shared by `woody sweep` and `woody calibrate`."""
+def add_arguments(parser: argparse.ArgumentParser, jobs_default: int | None, probe: bool = True) -> None:
+    """--scheduler and --jobs (and --scaling-probe with ``probe``), shared by `woody sweep` and `woody calibrate`."""
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
                         help="run on an existing Dask cluster, e.g. tcp://HOST:8786 (default: an embedded "
                              "LocalCluster on this machine); see docs/cluster.md")
     parser.add_argument("--jobs", type=int, default=jobs_default,
                         help="worker processes of the embedded LocalCluster (default: cores; ignored with --scheduler)")
-    parser.add_argument("--scaling-probe", type=int, default=DEFAULT_PROBE_RUNS, metavar="RUNS",
-                        help="with more than one worker, evaluate this many runs one at a time first to measure "
-                             f"the one-worker rate for the scaling efficiency (default {DEFAULT_PROBE_RUNS}; 0: off)")
+    if probe:
+        parser.add_argument("--scaling-probe", type=int, default=DEFAULT_PROBE_RUNS, metavar="RUNS",
+                            help="with more than one worker, evaluate this many runs one at a time first to measure "
+                                 f"the one-worker rate for the scaling efficiency (default {DEFAULT_PROBE_RUNS}; 0: off)")
 
 
 # ---------------------------------------------------------------- worker side
@@ -100,25 +101,41 @@ def worker_stats() -> dict:
 
 # ---------------------------------------------------------------- client side
 
+class ClusterUnavailable(RuntimeError):
+    """The scheduler cannot be reached, or no worker joined in time."""
+
+
 @contextmanager
 def connect(scheduler: str | None, jobs: int, name: str) -> Iterator:
     """A Dask client on the given scheduler, or on an embedded LocalCluster of ``jobs`` one-thread workers."""
-    from distributed import Client, LocalCluster
-
-    cluster = None
-    if scheduler:
-        client = Client(scheduler, timeout="30s")
-    else:
-        cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, silence_logs=logging.ERROR)
-        client = Client(cluster)
+    client, cluster = _open(scheduler, jobs)
     try:
-        client.wait_for_workers(1, timeout=WORKER_WAIT_S)
         _announce(client, name)
         yield client
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _open(scheduler: str | None, jobs: int) -> tuple:
+    from distributed import Client, LocalCluster
+
+    cluster = client = None
+    try:
+        if scheduler:
+            client = Client(scheduler, timeout="30s")
+        else:
+            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, silence_logs=logging.ERROR)
+            client = Client(cluster)
+        client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+    except (OSError, TimeoutError, ValueError) as exc:
+        for thing in (client, cluster):
+            if thing is not None:
+                thing.close()
+        where = scheduler or "(local cluster)"
+        raise ClusterUnavailable(f"cannot use the Dask cluster {where}: {type(exc).__name__}: {exc}") from exc
+    return client, cluster
 
 
 def _announce(client, name: str) -> None:

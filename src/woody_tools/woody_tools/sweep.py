@@ -220,8 +220,8 @@ def _evaluate_todo(args: argparse.Namespace, todo: list[RunSpec], meshes: dict,
             stats = cluster.run_tasks(client, _work, cluster.probe_order(todo, args.scaling_probe), meshes,
                                       runs_file.append, "sweep", probe=args.scaling_probe)
             print(f"woody sweep: {cluster.describe_workers(client)}", file=sys.stderr)
-    except (OSError, TimeoutError) as exc:
-        print(f"woody sweep: cannot use the Dask cluster {args.scheduler or '(local)'}: {exc}", file=sys.stderr)
+    except cluster.ClusterUnavailable as exc:
+        print(f"woody sweep: {exc}", file=sys.stderr)
         return None
     print(f"woody sweep: {stats.summary()}", file=sys.stderr)
     for line in stats.failed:
