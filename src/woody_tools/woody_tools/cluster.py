@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
+from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 from woody_sim.meshes import BUILTIN_DIR, FilletMesh, generate_fillet, load_mesh
 from woody_tools.experiment import RunSpec
 
@@ -58,8 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser, jobs_default: int | None, pro
                         help="worker processes of the embedded LocalCluster (default: cores; ignored with --scheduler)")
     if probe:
         parser.add_argument("--scaling-probe", type=int, default=DEFAULT_PROBE_RUNS, metavar="RUNS",
-                            help="with more than one worker, evaluate this many runs one at a time first to measure "
-                                 f"the one-worker rate for the scaling efficiency (default {DEFAULT_PROBE_RUNS}; 0: off)")
+                            help="with more than one worker, evaluate this many runs one at a time first to "
+                                 "measure the one-worker rate for the scaling efficiency "
+                                 f"(default {DEFAULT_PROBE_RUNS}; 0: off)")
 
 
 # ---------------------------------------------------------------- worker side
@@ -94,6 +96,15 @@ def _task(evaluate: Evaluate, run: RunSpec, ref: MeshRef) -> list[dict]:
         return evaluate(run, _MESHES[ref])
 
 
+class WarmWorker(WorkerPlugin):
+    """Imports the simulation stack on every worker, current and joining, before its first task."""
+
+    name = "woody-warm"
+
+    def setup(self, worker) -> None:
+        import woody_tools.experiment  # noqa: F401  (pybullet, OpenCV, trimesh: seconds on a cold worker)
+
+
 def worker_stats() -> dict:
     """What this worker process did: runs evaluated and loads per mesh (each should be 1)."""
     return {"runs": _TASKS["runs"], "loads": {f"{k}:{v}": n for (k, v), n in _LOADS.items()}}
@@ -110,6 +121,7 @@ def connect(scheduler: str | None, jobs: int, name: str) -> Iterator:
     """A Dask client on the given scheduler, or on an embedded LocalCluster of ``jobs`` one-thread workers."""
     client, cluster = _open(scheduler, jobs)
     try:
+        client.register_plugin(WarmWorker())
         _announce(client, name)
         yield client
     finally:
@@ -119,8 +131,6 @@ def connect(scheduler: str | None, jobs: int, name: str) -> Iterator:
 
 
 def _open(scheduler: str | None, jobs: int) -> tuple:
-    from distributed import Client, LocalCluster
-
     cluster = client = None
     try:
         if scheduler:
@@ -247,8 +257,6 @@ def run_tasks(client, evaluate: Evaluate, runs: list[RunSpec], meshes: dict[str,
 
 def _gather(futures: list, stats: Throughput, on_rows, bar, start: float, batches: bool) -> None:
     """Hand rows to ``on_rows`` as tasks finish, one call per burst of finished tasks."""
-    from distributed import as_completed
-
     done = as_completed(futures)
     pending: list[dict] = []
     try:
