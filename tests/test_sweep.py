@@ -19,7 +19,7 @@ ARGS = ["sweep", "--meshes", MESHES, "--k", "0,100", "--speeds", "100", "--jobs"
 
 def _woody(*args: str) -> subprocess.CompletedProcess:
     cmd = [sys.executable, "-c", "import sys; from woody_tools.cli import main; sys.exit(main(sys.argv[1:]))", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=300)  # a LocalCluster on a busy 2-core machine
 
 
 def _rows(path: Path) -> list[dict]:
