@@ -53,7 +53,10 @@ def _same(a: str, b: str) -> bool:
 
 @pytest.fixture
 def dask_cluster(tmp_path):
-    """A scheduler and two one-thread workers (no nanny, so a killed worker stays dead); yields (address, workers)."""
+    """A scheduler and two one-thread workers (no nanny, so a killed worker stays dead) on free ports.
+
+    Yields (scheduler address, worker processes).
+    """
     procs: list[subprocess.Popen] = []
     logs = []
 
@@ -64,7 +67,7 @@ def dask_cluster(tmp_path):
         return procs[-1]
 
     info = tmp_path / "scheduler.json"
-    start("scheduler", "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+    start("scheduler", "scheduler", "--host", "127.0.0.1", "--port", "0", "--dashboard-address", "127.0.0.1:0",
           "--scheduler-file", str(info))
     deadline = time.monotonic() + 60
     while not (info.exists() and info.stat().st_size):
@@ -72,7 +75,7 @@ def dask_cluster(tmp_path):
         time.sleep(0.2)
     address = json.loads(info.read_text())["address"]
     workers = [start(f"worker{i}", "worker", address, "--nthreads", "1", "--no-nanny", "--host", "127.0.0.1",
-                     "--no-dashboard", "--name", f"w{i}") for i in range(2)]
+                     "--dashboard-address", "127.0.0.1:0", "--name", f"w{i}") for i in range(2)]
     from distributed import Client
 
     with Client(address, timeout="30s") as client:
@@ -96,6 +99,7 @@ def test_scheduler_sweep_equals_local_and_resumes(dask_cluster, tmp_path):
     remote = _woody("sweep", *GRID, "--scheduler", address, "--scaling-probe", "1", "--out", str(tmp_path / "remote"))
     assert remote.returncode == 0, remote.stderr[-3000:]
     assert f"Dask scheduler {address}, 2 workers" in remote.stderr
+    assert "woody sweep: dashboard http://127.0.0.1:" in remote.stderr
     assert "scaling efficiency" in remote.stderr and "each worker loaded each mesh once" in remote.stderr
 
     a, b = _rows(tmp_path / "local" / "runs.csv"), _rows(tmp_path / "remote" / "runs.csv")

@@ -136,7 +136,8 @@ def _open(scheduler: str | None, jobs: int) -> tuple:
         if scheduler:
             client = Client(scheduler, timeout="30s")
         else:
-            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, silence_logs=logging.ERROR)
+            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
+                                   dashboard_address="127.0.0.1:8787")  # another free port if taken
             client = Client(cluster)
         client.wait_for_workers(1, timeout=WORKER_WAIT_S)
     except (OSError, TimeoutError, ValueError) as exc:
