@@ -220,7 +220,8 @@ def probe_order(runs: list, probe: int) -> list:
         return list(runs)
     step = len(runs) / probe
     picked = sorted({int(i * step) for i in range(probe)})
-    return [runs[i] for i in picked] + [r for i, r in enumerate(runs) if i not in set(picked)]
+    chosen = set(picked)
+    return [runs[i] for i in picked] + [r for i, r in enumerate(runs) if i not in chosen]
 
 
 def run_tasks(client, evaluate: Evaluate, runs: list[RunSpec], meshes: dict[str, FilletMesh],
