@@ -196,3 +196,19 @@ def test_scaling_efficiency_compares_per_worker_rate_with_one_worker_alone():
     assert stats.efficiency == pytest.approx(60.0 / 36.0)
     assert "scaling efficiency 167 %" in stats.summary()
     assert cluster.Throughput(evaluations=6, wall_s=3.0, workers=1).efficiency is None
+
+
+def _broken(run: RunSpec, mesh) -> list[dict]:
+    raise RuntimeError("boom")
+
+
+def test_a_task_the_cluster_cannot_run_gives_no_rows_and_is_listed():
+    from distributed import Client, LocalCluster
+
+    got: list[dict] = []
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address="127.0.0.1:0") as local, \
+            Client(local) as client:
+        stats = cluster.run_tasks(client, _broken, [RunSpec("generated-70001", 0.0, 100.0)],
+                                  {"generated-70001": generate_fillet(70001)}, got.extend, "test")
+    assert got == [] and stats.evaluations == 0
+    assert len(stats.failed) == 1 and "RuntimeError: boom" in stats.failed[0]
