@@ -25,7 +25,7 @@ def fake_evaluate(runs, spec, jobs, desc):
 def test_loo_plans_reference_meshes_only_and_reports_each_fold(tmp_path, monkeypatch, capsys):
     planned = []
     monkeypatch.setattr(calibrate, "_evaluate", lambda runs, *a: planned.extend(runs) or fake_evaluate(runs, *a))
-    assert calibrate.run_loo("builtin", 1, tmp_path) == 0
+    assert calibrate.run_loo("builtin", None, tmp_path) == 0
     assert {r.mesh for r in planned} == set(PHI)  # the generated meshes of 'builtin' are not reference meshes
     assert {(r.k, r.speed_fpm) for r in planned} == {(0.0, 100.0), (100.0, 100.0), (0.0, 130.0), (100.0, 130.0)}
     mass = load_calibration().total_mass_kg

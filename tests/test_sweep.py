@@ -19,7 +19,7 @@ ARGS = ["sweep", "--meshes", MESHES, "--k", "0,100", "--speeds", "100", "--jobs"
 
 def _woody(*args: str) -> subprocess.CompletedProcess:
     cmd = [sys.executable, "-c", "import sys; from woody_tools.cli import main; sys.exit(main(sys.argv[1:]))", *args]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=300)  # a LocalCluster on a busy 2-core machine
 
 
 def _rows(path: Path) -> list[dict]:
@@ -103,3 +103,25 @@ def test_threshold_and_roc_helpers():
     assert 9.0 < t < 15.0 and bacc == 1.0
     assert results.roc(normal, severe)[2] == 1.0
     assert results.accuracy(normal, severe, 8.0)[0] == pytest.approx(5 / 6)
+
+
+def test_runs_file_replaces_atomically(tmp_path, monkeypatch):
+    from woody_tools import sweep
+
+    path = tmp_path / "runs.csv"
+    row = {"mesh": "m", "k": 0.0, "speed_fpm": 100.0, "lane": 0, "mass": 20.0, "phi": 1.5, "status": "scored"}
+    runs = sweep.RunsFile(path, [row])
+    runs.append([dict(row, lane=1)])
+    before = path.read_text()
+    assert len(_rows(path)) == 2
+
+    def interrupted(fd):  # Ctrl-C while the next batch is being written
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep.os, "fsync", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        runs.append([dict(row, lane=2)])
+    assert path.read_text() == before  # the previous batch's file, whole
+    monkeypatch.undo()
+    done, _ = sweep.completed_runs(path, lanes=2)
+    assert done == {sweep._key("m", 0.0, 100.0, 20.0)}

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from woody_common.calibration import Calibration, load_calibration, write_calibration
-from woody_tools import physics_fit
+from woody_tools import cluster, physics_fit
 from woody_tools.experiment import RunSpec
 
 CALIBRATION_MESHES = "generated:8:9"
@@ -71,44 +71,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frictions", type=_floats, default=[0.8], help="drive friction caps mu_static to try")
     parser.add_argument("--skip-physics", action="store_true", help="keep the current physics, choose the threshold")
     parser.add_argument("--skip-threshold", action="store_true", help="fit the physics only")
-    parser.add_argument("--jobs", type=int, default=None, help="worker processes (default: cores)")
     parser.add_argument("--out", default="calibration-out", help="folder for calibration.json / calibration.md")
     parser.add_argument("--calibration", default=None, help="calibration file to write (default config/calibration.yaml)")
     parser.add_argument("--dry-run", action="store_true", help="print the results, do not write the calibration")
     parser.add_argument("--loo", action="store_true",
                         help="leave-one-mesh-out check of the threshold on the reference meshes (k 0/100, 100 and "
                              "130 FPM, with the calibrated physics); writes loo.md / loo.json, writes no calibration")
+    cluster.add_arguments(parser, jobs_default=None, probe=False)
 
 
-def _evaluate(runs: list[RunSpec], mesh_spec: str, jobs: int, desc: str) -> list[dict]:
-    import multiprocessing as mp
-
-    from tqdm import tqdm
-
+def _evaluate(runs: list[RunSpec], mesh_spec: str, client, desc: str) -> list[dict]:
+    """The runs' rows, evaluated on the Dask cluster exactly like `woody sweep` evaluates its grid."""
     from woody_tools import sweep
 
-    sweep._MESHES = sweep._load_meshes(mesh_spec)
     rows: list[dict] = []
-    with tqdm(total=len(runs), unit="run", desc=desc, file=sys.stderr, dynamic_ncols=True) as bar:
-        if jobs <= 1:
-            for run in runs:
-                rows += sweep._work(run)
-                bar.update(1)
-        else:
-            with mp.get_context("fork").Pool(jobs, initializer=sweep._worker_init, initargs=(mesh_spec,)) as pool:
-                for r in pool.imap_unordered(sweep._work, runs):
-                    rows += r
-                    bar.update(1)
+    stats = cluster.run_tasks(client, sweep._work, runs, sweep._load_meshes(mesh_spec), rows.extend, desc)
+    for line in stats.failed:
+        print(f"woody calibrate: not computed: {line}", file=sys.stderr)
     return rows
 
 
-def fit_physics(names: list[str], spec: str, args: argparse.Namespace, jobs: int) -> tuple[dict, list[dict]]:
+def fit_physics(names: list[str], spec: str, args: argparse.Namespace, client) -> tuple[dict, list[dict]]:
     """Grid search of (M, c, mu) against the paper's side table; the best point's values and the log."""
     def evaluate(point: physics_fit.FitPoint) -> list[dict]:
         runs = [RunSpec(n, k, s, lanes=1, mass=point.mass, damping=point.damping,
                         friction_static=point.friction_static, top=False)
                 for n in names for s in SPEEDS for k in SIDE_K]
-        return _evaluate(runs, spec, jobs, f"M={point.mass:g} c={point.damping:g} mu={point.friction_static:g}")
+        return _evaluate(runs, spec, client, f"M={point.mass:g} c={point.damping:g} mu={point.friction_static:g}")
 
     def report(point, entry, score) -> None:
         print(f"  M {point.mass:g} kg, c {point.damping:g}, mu {point.friction_static:g}: objective {score:.3f}, "
@@ -128,7 +117,7 @@ def _phi_split(rows: list[dict]) -> tuple[list[float], list[float]]:
 
 
 def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict, args: argparse.Namespace,
-                     jobs: int) -> dict:
+                     client) -> dict:
     """Φ cut on the calibration meshes, its accuracy on the held-out ones, and the top-view speed effect."""
     from woody_tools import results
 
@@ -136,7 +125,7 @@ def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict,
         runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
                         friction_static=physics["friction_static"], side=False)
                 for n in names for s in SPEEDS for k in (0.0, 100.0)]
-        return _evaluate(runs, spec, jobs, desc)
+        return _evaluate(runs, spec, client, desc)
 
     cal_rows = rows_for(cal_names, args.meshes, "threshold (calibration set)")
     normal, severe = _phi_split(cal_rows)
@@ -193,15 +182,22 @@ def _provenance(args: argparse.Namespace, report: dict) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    import os
+    jobs = args.jobs or cluster.default_jobs()
+    try:
+        with cluster.connect(args.scheduler, jobs, "woody calibrate") as client:
+            return _calibrate(args, client)
+    except cluster.ClusterUnavailable as exc:
+        print(f"woody calibrate: {exc}", file=sys.stderr)
+        return 2
 
+
+def _calibrate(args: argparse.Namespace, client) -> int:
     from woody_tools import sweep
 
-    jobs = args.jobs or os.cpu_count() or 1
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.loo:
-        return run_loo(args.meshes or LOO_MESHES, jobs, out)
+        return run_loo(args.meshes or LOO_MESHES, client, out)
     args.meshes = args.meshes or CALIBRATION_MESHES
     cal_names = list(sweep._load_meshes(args.meshes))
     test_names = list(sweep._load_meshes(args.test_meshes))
@@ -217,14 +213,14 @@ def run(args: argparse.Namespace) -> int:
         names = cal_names[: max(1, args.fit_meshes)]
         print(f"woody calibrate: physics fit on {len(names)} meshes, side view, k {SIDE_K}, {SPEEDS} FPM",
               file=sys.stderr)
-        physics, report["physics_fit"] = fit_physics(names, args.meshes, args, jobs)
+        physics, report["physics_fit"] = fit_physics(names, args.meshes, args, client)
         report["fit_meshes"] = ",".join(names)
         print(f"woody calibrate: M = {physics['total_mass_kg']:g} kg, c = {physics['hinge_damping']:g}, "
               f"mu = {physics['friction_static']:g}")
     report["physics"] = physics
     threshold = current.phi_threshold
     if not args.skip_threshold:
-        report.update(choose_threshold(cal_names, test_names, physics, args, jobs))
+        report.update(choose_threshold(cal_names, test_names, physics, args, client))
         threshold = report["threshold"]
     report["wall_s"] = round(time.perf_counter() - t0, 1)
     (out / "calibration.json").write_text(json.dumps(report, indent=2))
@@ -261,7 +257,7 @@ def _write_md(path: Path, report: dict) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def run_loo(spec: str, jobs: int, out: Path) -> int:
+def run_loo(spec: str, client, out: Path) -> int:
     """`woody calibrate --loo`: leave-one-mesh-out threshold check on the reference meshes of ``spec``."""
     from woody_tools import evaluation, sweep
 
@@ -273,7 +269,7 @@ def run_loo(spec: str, jobs: int, out: Path) -> int:
     mass = load_calibration().total_mass_kg
     runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False) for n in names for s in (100.0, 130.0)
             for k in (evaluation.NORMAL_K, evaluation.SEVERE_K)]
-    rows = _evaluate(runs, spec, jobs, f"leave-one-out ({len(names)} reference meshes)")
+    rows = _evaluate(runs, spec, client, f"leave-one-out ({len(names)} reference meshes)")
     units = evaluation.run_units(rows)
     report: dict = {"meshes": names, "mass": mass, "speeds": {}}
     lines = [f"# Leave-one-out over {len(names)} reference meshes (M = {mass:g} kg)\n"]

@@ -1,13 +1,16 @@
-"""`woody sweep`: the paper's drop-test grid (meshes x k x line speed), headless, parallel and resumable.
+"""`woody sweep`: the paper's drop-test grid (meshes x k x line speed), headless, on Dask, resumable.
 
 One run = the same mesh in every lane at one stiffness k and speed
 (:func:`woody_tools.experiment.evaluate_run`); it yields one row per lane
 (fillet). Top-down columns (phi, hu_term, solidity_term) come from every lane,
 side-view columns (nmdm, mdm, be) from the centre lane the side camera
-watches, empty elsewhere. Rows are appended to ``runs.csv`` as each run
-finishes, so a killed sweep loses at most the runs in flight; a rerun skips
-every run whose rows are all there (a run with missing lane rows is redone).
-At the end ``results.md`` and the plots are (re)built from the whole CSV.
+watches, empty elsewhere. The runs go to a Dask cluster (:mod:`woody_tools.cluster`:
+an embedded LocalCluster, or ``--scheduler``). Only this process writes
+``runs.csv``: each batch of finished runs replaces the file atomically, so a
+killed or interrupted sweep leaves a valid file and loses at most the runs in
+flight; a rerun skips every run whose rows are all there, whichever cluster
+computed them (a run with missing lane rows is redone). At the end
+``results.md`` and the plots are (re)built from the whole CSV.
 With ``--traces`` every run also writes its lanes' Φ windows frame by frame
 (:mod:`woody_tools.traces`), and a run counts as done only with its trace.
 """
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import math
 import os
@@ -26,6 +30,7 @@ from pathlib import Path
 
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
 from woody_sim.sensor_model import PRESETS
+from woody_tools import cluster
 from woody_tools.experiment import RUN_COLUMNS, RunSpec
 
 TOP_K = (0.0, 20.0, 40.0, 60.0, 80.0, 100.0)
@@ -59,22 +64,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "0..100 and side-view 0,10,100,200,400)")
     parser.add_argument("--speeds", type=_floats, default=list(DEFAULT_SPEEDS), help="line speeds in FPM (default 100,130)")
     parser.add_argument("--lanes", type=int, default=3, help="identical fillets side by side per run (default 3)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: cores)")
     parser.add_argument("--out", default="sweep-out", help="output folder (runs.csv, results.md, *.png)")
     parser.add_argument("--mass", type=float, default=None,
                         help="total chain mass M in kg (default: the calibrated one, config/calibration.yaml)")
-    parser.add_argument("--no-side", action="store_true", help="skip the side view (top-down Φ only)")
     parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
                         help="top camera error model (docs/sensors.md); use its own --out; default ideal")
-    parser.add_argument("--no-report", action="store_true", help="only run; do not rebuild results.md and plots")
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m); one camera per --out folder")
     parser.add_argument("--traces", action="store_true",
                         help="also write Φ, Hu and solidity terms of every window frame per fillet: traces.csv and "
                              "traces/<mesh>_<speed>fpm.png (runs already done without a trace are redone)")
+    parser.add_argument("--no-side", action="store_true", help="skip the side view (top-down Φ only)")
+    parser.add_argument("--no-report", action="store_true", help="only run; do not rebuild results.md and plots")
     parser.add_argument("--docs", default=None, metavar="DIR",
                         help="also write results.md to DIR/results.md and the plots to DIR/results/ (e.g. docs)")
+    cluster.add_arguments(parser, jobs_default=cluster.default_jobs())
 
 
 # ---------------------------------------------------------------- csv helpers
@@ -90,16 +95,40 @@ def read_rows(path: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
-def _write_rows(path: Path, rows: list[dict], mode: str) -> None:
-    new = mode == "w" or not path.exists() or path.stat().st_size == 0
-    with path.open(mode, newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=RUN_COLUMNS, extrasaction="ignore")
-        if new:
-            writer.writeheader()
-        for row in rows:
-            writer.writerow({c: _fmt(row.get(c, "")) for c in RUN_COLUMNS})
-        fh.flush()
-        os.fsync(fh.fileno())
+class RunsFile:
+    """``runs.csv``, written by the client only: every write replaces the whole file atomically.
+
+    The text is kept in memory and written to a temporary file that is
+    fsync'ed and renamed over the old one, so a Ctrl-C or a kill at any moment
+    leaves either the previous batch's file or the new one, never a torn row.
+    """
+
+    def __init__(self, path: Path, rows: list[dict]):
+        self.path = path
+        self._text = _csv_text(rows, header=True)
+        self._replace()
+
+    def append(self, rows: list[dict]) -> None:
+        self._text += _csv_text(rows, header=False)
+        self._replace()
+
+    def _replace(self) -> None:
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        with tmp.open("w", newline="") as fh:
+            fh.write(self._text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, self.path)
+
+
+def _csv_text(rows: list[dict], header: bool) -> str:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=RUN_COLUMNS, extrasaction="ignore")
+    if header:
+        writer.writeheader()
+    for row in rows:
+        writer.writerow({c: _fmt(row.get(c, "")) for c in RUN_COLUMNS})
+    return buffer.getvalue()
 
 
 def _fmt(value) -> object:
@@ -108,9 +137,9 @@ def _fmt(value) -> object:
     return value
 
 
-def completed_runs(path: Path, lanes: int, traced: Path | None = None) -> set[tuple]:
+def completed_runs(path: Path, lanes: int, traced: Path | None = None) -> tuple[set[tuple], RunsFile]:
     """Keys of runs with all their lane rows in the CSV (and, with ``traced`` = the sweep folder, their trace
-    file); rows of other runs are dropped from the file so they are redone cleanly."""
+    file), and the file to append to without the other runs' rows (they are redone cleanly)."""
     rows = read_rows(path)
     by_run: dict[tuple, list[dict]] = {}
     for row in rows:
@@ -125,15 +154,10 @@ def completed_runs(path: Path, lanes: int, traced: Path | None = None) -> set[tu
 
         done = {key for key in done if run_file(traced, key[0], key[1], key[2], key[3]).exists()}
     keep = [r for key, rs in by_run.items() if key in done for r in rs]
-    if len(keep) != len(rows):
-        _write_rows(path, keep, "w")
-    return done
+    return done, RunsFile(path, keep)
 
 
-# ---------------------------------------------------------------- workers
-
-_MESHES: dict = {}
-
+# ---------------------------------------------------------------- evaluation
 
 def _load_meshes(spec: str) -> dict:
     from woody_sim.meshes import load_mesh_set
@@ -147,59 +171,15 @@ def _load_meshes(spec: str) -> dict:
     return by_name
 
 
-def _worker_init(spec: str) -> None:
-    global _MESHES
-    if not _MESHES:
-        _MESHES = _load_meshes(spec)
-
-
-def _work(run: RunSpec) -> list[dict]:
+def _work(run: RunSpec, mesh) -> list[dict]:
+    """One run's rows, on a worker; an evaluation error becomes error rows so one broken mesh cannot stop a sweep."""
     from woody_tools.experiment import evaluate_run
 
     try:
-        return evaluate_run(run, _MESHES[run.mesh])
-    except Exception as exc:  # one broken mesh must not stop the sweep
+        return evaluate_run(run, mesh)
+    except Exception as exc:
         return [{"mesh": run.mesh, "k": run.k, "speed_fpm": run.speed_fpm, "lane": lane, "mass": run.mass,
                  "status": "error", "reason": f"{type(exc).__name__}: {exc}"} for lane in range(run.lanes)]
-
-
-def run_grid(runs: list[RunSpec], mesh_spec: str, jobs: int, csv_path: Path, desc: str = "sweep",
-             trace_out: Path | None = None) -> tuple[int, float]:
-    """Evaluate the runs in parallel, appending rows as they finish (and their traces to ``trace_out`` if given);
-    returns (rows written, wall s)."""
-    from tqdm import tqdm
-
-    from woody_tools.traces import write_run
-
-    def save(rows: list[dict]) -> None:
-        _write_rows(csv_path, rows, "a")
-        if trace_out is not None:
-            write_run(trace_out, rows)
-
-    global _MESHES
-    if not runs:
-        return 0, 0.0
-    _MESHES = _load_meshes(mesh_spec)  # forked workers inherit the loaded meshes
-    written = 0
-    start = time.perf_counter()
-    with tqdm(total=len(runs), unit="run", desc=desc, dynamic_ncols=True, file=sys.stderr) as bar:
-        if jobs <= 1:
-            for run in runs:
-                rows = _work(run)
-                save(rows)
-                written += len(rows)
-                bar.update(1)
-        else:
-            import multiprocessing as mp
-
-            ctx = mp.get_context("fork")
-            with ctx.Pool(jobs, initializer=_worker_init, initargs=(mesh_spec,), maxtasksperchild=200) as pool:
-                for rows in pool.imap_unordered(_work, runs, chunksize=1):
-                    save(rows)
-                    written += len(rows)
-                    bar.update(1)
-                    bar.set_postfix_str(f"{written / max(time.perf_counter() - start, 1e-9) * 60:.0f} evals/min")
-    return written, time.perf_counter() - start
 
 
 def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
@@ -213,39 +193,39 @@ def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int
 def run(args: argparse.Namespace) -> int:
     from woody_common.calibration import load_calibration
 
-    if args.lanes < 1 or args.jobs < 1:
-        print("woody sweep: --lanes and --jobs must be >= 1", file=sys.stderr)
+    if args.lanes < 1 or args.jobs < 1 or args.scaling_probe < 0:
+        print("woody sweep: --lanes and --jobs must be >= 1, --scaling-probe >= 0", file=sys.stderr)
         return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     mass = float(args.mass) if args.mass is not None else load_calibration().total_mass_kg
     try:
-        names = list(_load_meshes(args.meshes))
+        meshes = _load_meshes(args.meshes)
     except ValueError as exc:
         print(f"woody sweep: {exc}", file=sys.stderr)
         return 2
-    if not names:
+    if not meshes:
         print("woody sweep: no usable meshes", file=sys.stderr)
         return 2
+    names = list(meshes)
     csv_path = out / CSV_FILE
     camera = _folder_camera(out / META_FILE)
     if camera not in (None, args.top_camera):
         print(f"woody sweep: {out} holds runs with --top-camera {camera}; use another --out for "
               f"--top-camera {args.top_camera}", file=sys.stderr)
         return 2
-    done = completed_runs(csv_path, args.lanes, out if args.traces else None)
+    done, runs_file = completed_runs(csv_path, args.lanes, out if args.traces else None)
     runs = plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, top_camera=args.top_camera,
                 sensor=args.sensor)
     todo = [r for r in runs if _key(r.mesh, r.k, r.speed_fpm, mass) not in done]
+    where = args.scheduler or f"a local Dask cluster of {min(args.jobs, max(1, len(todo)))} workers"
     print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds = {len(runs)} runs "
           f"({len(runs) - len(todo)} already in {csv_path}, {len(todo)} to go), {args.lanes} lanes, "
-          f"M = {mass:g} kg, top camera {args.top_camera}, {args.jobs} jobs", file=sys.stderr)
-    written, wall = run_grid(todo, args.meshes, min(args.jobs, max(1, len(todo))), csv_path,
-                             trace_out=out if args.traces else None)
-    meta = _update_meta(out / META_FILE, written, wall, args, len(names), mass)
-    if written:
-        print(f"woody sweep: {written} fillet evaluations in {wall:.1f} s = {written / wall * 60:.0f} /min",
-              file=sys.stderr)
+          f"M = {mass:g} kg, top camera {args.top_camera}, on {where}", file=sys.stderr)
+    failed = _evaluate_todo(args, todo, meshes, runs_file)
+    if failed is None:
+        return 2
+    meta = _update_meta(out / META_FILE, failed, args, len(names), mass)
     if not args.no_report:
         from woody_tools import results
 
@@ -253,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"woody sweep: wrote {md}", file=sys.stderr)
     if args.traces:
         _report_traces(out)
-    return 0
+    return 1 if failed.failed else 0
 
 
 def _report_traces(out: Path) -> None:
@@ -275,13 +255,41 @@ def _folder_camera(meta_path: Path) -> str | None:
     return cameras.pop() if len(cameras) == 1 else None
 
 
-def _update_meta(path: Path, written: int, wall: float, args: argparse.Namespace, n_meshes: int, mass: float) -> dict:
+def _evaluate_todo(args: argparse.Namespace, todo: list[RunSpec], meshes: dict,
+                   runs_file: RunsFile) -> cluster.Throughput | None:
+    """Run the missing runs on the cluster; None (after one line on stderr) when the cluster cannot be reached."""
+    if not todo:
+        return cluster.Throughput()
+    def save(rows: list[dict]) -> None:
+        runs_file.append(rows)
+        if args.traces:
+            from woody_tools.traces import write_run
+
+            write_run(Path(args.out), rows)
+
+    try:
+        with cluster.connect(args.scheduler, min(args.jobs, len(todo)), "woody sweep") as client:
+            stats = cluster.run_tasks(client, _work, cluster.probe_order(todo, args.scaling_probe), meshes,
+                                      save, "sweep", probe=args.scaling_probe)
+            print(f"woody sweep: {cluster.describe_workers(client)}", file=sys.stderr)
+    except cluster.ClusterUnavailable as exc:
+        print(f"woody sweep: {exc}", file=sys.stderr)
+        return None
+    print(f"woody sweep: {stats.summary()}", file=sys.stderr)
+    for line in stats.failed:
+        print(f"woody sweep: not computed (rerun to retry): {line}", file=sys.stderr)
+    return stats
+
+
+def _update_meta(path: Path, stats: cluster.Throughput, args: argparse.Namespace, n_meshes: int,
+                 mass: float) -> dict:
     meta = json.loads(path.read_text()) if path.exists() else {"invocations": []}
-    if written:
+    if stats.evaluations:
         meta["invocations"].append({
             "command": ("woody " + " ".join(shlex.quote(a) for a in sys.argv[1:]))
             if Path(sys.argv[0]).name == "woody" else "woody " + " ".join(shlex.quote(a) for a in _argv(args)),
-            "evaluations": written, "wall_s": round(wall, 2), "jobs": args.jobs, "cores": os.cpu_count(),
+            "evaluations": stats.evaluations, "wall_s": round(stats.wall_s, 2), "jobs": stats.workers,
+            "cores": os.cpu_count(), "scheduler": args.scheduler or "local", **stats.as_meta(),
             "meshes": args.meshes, "n_meshes": n_meshes, "mass": mass, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
             "top_camera": args.top_camera,
         })
@@ -295,6 +303,8 @@ def _argv(args: argparse.Namespace) -> list[str]:
     out = ["sweep", "--meshes", args.meshes, "--k", ",".join(f"{k:g}" for k in args.k),
            "--speeds", ",".join(f"{s:g}" for s in args.speeds), "--lanes", str(args.lanes),
            "--jobs", str(args.jobs), "--out", str(args.out)]
+    if args.scheduler:
+        out += ["--scheduler", args.scheduler]
     if args.mass is not None:
         out += ["--mass", f"{args.mass:g}"]
     if args.top_camera != "default":
