@@ -205,6 +205,10 @@ def run(args: argparse.Namespace) -> int:
         for node in nodes:
             if node.name != "recorder":
                 node.signal(signal.SIGINT)
+        deadline = time.monotonic() + 10.0
+        for node in nodes:  # one SIGINT each: a second one would interrupt a node's own clean shutdown
+            if node.name != "recorder":
+                wait_for(lambda: not node.alive(), timeout=max(0.0, deadline - time.monotonic()))
         for node in nodes:
             if node.name != "recorder":
                 node.stop(timeout=10.0)
@@ -229,6 +233,7 @@ def run(args: argparse.Namespace) -> int:
     report = build_report(rows, out, title="woody line run", run_info=info)
     print(verdict_table(rows))
     print(f"\nbag: {bag}\nverdicts: {csv_path}\nreport: {report}\nnode logs: {logs}/")
+    print(f"sim {monitor.sim_time:.1f} s in {wall:.1f} s wall: rtf {monitor.sim_time / max(wall, 1e-9):.2f}x")
     print(cpu.summary(wall))
     if error:
         print(f"woody run: {error}", file=sys.stderr)
