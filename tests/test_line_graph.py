@@ -81,7 +81,7 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
     nodes = [NodeProcess("segmenter", vision, domain_id=ros_domain, log_dir=tmp_path),
              NodeProcess("grader", vision, domain_id=ros_domain, log_dir=tmp_path),
              NodeProcess("reject_gate", {"use_sim_time": True}, domain_id=ros_domain, log_dir=tmp_path),
-             NodeProcess("line_sim", {"fillets": 6, "duration_s": 5.5, "wait_for_subscribers": 1},
+             NodeProcess("line_sim", {"fillets": 6, "duration_s": 5.5, "wait_for_subscribers": 1, "max_lead_s": 0.1},
                          domain_id=ros_domain, log_dir=tmp_path)]
     try:
         spin_until(ros_node, lambda: not nodes[-1].alive() or not all(n.alive() for n in nodes[:3]), timeout=240.0)

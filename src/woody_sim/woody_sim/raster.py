@@ -30,23 +30,21 @@ _EMPTY = np.iinfo(np.int64).max
 
 
 @numba.njit(cache=True, nogil=True)
-def _project(verts, rot, trans, fx, fy, cx, cy):  # pragma: no cover - compiled
-    """Link-frame vertices (N, M, 3) posed by rot (N, 3, 3) and trans (N, 3): optical points, u, v, 1/z."""
+def _project(verts, rot, trans, fx, fy, cx, cy, pts, uvz):  # pragma: no cover - compiled
+    """Link-frame vertices (N, M, 3) posed by rot (N, 3, 3) and trans (N, 3), into ``pts``: optical points,
+    and ``uvz``: packed per vertex for the scan (one cache line), u, v, 1/z and z."""
     n, m = verts.shape[0], verts.shape[1]
-    pts = np.empty((n * m, 3))
-    u = np.empty(n * m)
-    v = np.empty(n * m)
-    inv = np.empty(n * m)
     for i in range(n):
         for j in range(m):
             k = i * m + j
             for r in range(3):
                 pts[k, r] = (verts[i, j, 0] * rot[i, r, 0] + verts[i, j, 1] * rot[i, r, 1]
                              + verts[i, j, 2] * rot[i, r, 2]) + trans[i, r]
-            inv[k] = 1.0 / pts[k, 2]
-            u[k] = fx * pts[k, 0] * inv[k] + cx
-            v[k] = fy * pts[k, 1] * inv[k] + cy
-    return pts, u, v, inv
+            inv = 1.0 / pts[k, 2]
+            uvz[k, 0] = fx * pts[k, 0] * inv + cx
+            uvz[k, 1] = fy * pts[k, 1] * inv + cy
+            uvz[k, 2] = inv
+            uvz[k, 3] = pts[k, 2]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -63,26 +61,26 @@ def _shade(pts, a, b, c, light, ambient, diffuse):  # pragma: no cover - compile
 
 @numba.njit(cache=True, nogil=True)
 def _scan(
-    pts, u, v, inv, faces, near, w, h, slot, light, ambient, diffuse, zkey, zdepth, zshade, zslot, lohi
+    pts, uvz, faces, near, w, h, slot, light, ambient, diffuse, zkey, zdepth, zshade, zslot, lohi
 ):  # pragma: no cover - compiled
     """Scan-convert one fillet's triangles into the buffers; widens the touched pixel range ``lohi``."""
     lo, hi = lohi[0], lohi[1]
     for t in range(faces.shape[0]):
         a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
-        if pts[a, 2] < near or pts[b, 2] < near or pts[c, 2] < near:
-            continue  # touching the near plane (fillets never get that close)
-        u0, v0, u1, v1, u2, v2 = u[a], v[a], u[b], v[b], u[c], v[c]
-        x0 = max(math.ceil(min(u0, u1, u2)), 0.0)
-        x1 = min(math.floor(max(u0, u1, u2)), w - 1.0)
-        y0 = max(math.ceil(min(v0, v1, v2)), 0.0)
-        y1 = min(math.floor(max(v0, v1, v2)), h - 1.0)
+        u0, v0, u1, v1, u2, v2 = uvz[a, 0], uvz[a, 1], uvz[b, 0], uvz[b, 1], uvz[c, 0], uvz[c, 1]
+        x0 = max(np.ceil(min(u0, u1, u2)), 0.0)
+        x1 = min(np.floor(max(u0, u1, u2)), w - 1.0)
+        y0 = max(np.ceil(min(v0, v1, v2)), 0.0)
+        y1 = min(np.floor(max(v0, v1, v2)), h - 1.0)
         if not (x1 >= x0 and y1 >= y0):
-            continue
+            continue  # no pixel centre inside the bounding box (most triangles: they are sub-pixel)
+        if uvz[a, 3] < near or uvz[b, 3] < near or uvz[c, 3] < near:
+            continue  # touching the near plane (fillets never get that close)
         area2 = (u1 - u0) * (v2 - v0) - (u2 - u0) * (v1 - v0)
         if area2 == 0.0 or area2 != area2:
             continue
         s = 1.0 if area2 > 0.0 else -1.0
-        z0, z1, z2 = inv[a], inv[b], inv[c]
+        z0, z1, z2 = uvz[a, 2], uvz[b, 2], uvz[c, 2]
         shade = -1.0
         for iy in range(int(y0), int(y1) + 1):
             py = float(iy)
@@ -133,12 +131,18 @@ class ZBuffer:
         n = self.w * self.h
         self._bufs = (np.full(n, _EMPTY, np.int64), np.zeros(n), np.zeros(n), np.zeros(n, np.int64))
         self._lohi = np.array([n, -1], np.int64)
+        self._pts = np.empty((0, 3))
+        self._uvz = np.empty((0, 4))
 
     def draw(self, verts: np.ndarray, faces: np.ndarray, rot: np.ndarray, trans: np.ndarray, slot: int) -> None:
         """Draw one segment chain: link-frame ``verts`` (N, M, 3), ``faces`` (T, 3) into verts.reshape(-1, 3),
         link -> optical rotations ``rot`` (N, 3, 3) and translations ``trans`` (N, 3); ``slot`` picks its colour."""
-        pts, u, v, inv = _project(verts, np.ascontiguousarray(rot), np.ascontiguousarray(trans), *self._cam)
-        _scan(pts, u, v, inv, faces, self._near, self.w, self.h, int(slot), *self._light, *self._bufs, self._lohi)
+        n = verts.shape[0] * verts.shape[1]
+        if self._pts.shape[0] < n:  # reused across frames: fresh multi-MB arrays would page-fault every frame
+            self._pts, self._uvz = np.empty((n, 3)), np.empty((n, 4))
+        pts, uvz = self._pts[:n], self._uvz[:n]
+        _project(verts, np.ascontiguousarray(rot), np.ascontiguousarray(trans), *self._cam, pts, uvz)
+        _scan(pts, uvz, faces, self._near, self.w, self.h, int(slot), *self._light, *self._bufs, self._lohi)
 
     def compose(self, colors: np.ndarray, rgb: np.ndarray, depth: np.ndarray | None = None) -> None:
         """Composite what was drawn over ``rgb`` (H, W, 3) uint8 and, if given, in front of ``depth`` (H, W)

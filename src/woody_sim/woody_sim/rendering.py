@@ -38,6 +38,7 @@ physics stepping of frame *k + 1* on the second core.
 
 from __future__ import annotations
 
+import ctypes
 import math
 import multiprocessing as mp
 import multiprocessing.connection as mpc
@@ -493,9 +494,18 @@ def _validate_poses(known: Mapping[int, Any], poses: Mapping[int, np.ndarray]) -
 
 
 # --------------------------------------------------------------------------- process wrapper
+def _name_process(name: bytes) -> None:
+    """Name this process as top and /proc show it (Linux PR_SET_NAME), so its CPU is attributed by name."""
+    try:
+        ctypes.CDLL(None).prctl(15, name, 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
+
+
 def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool, bool], buffers: dict) -> None:
     # Ctrl-C in a terminal reaches the whole process group; the parent decides when rendering stops.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _name_process(b"woody-render")
     parent = mp.parent_process()
     sentinel = parent.sentinel if parent is not None else None
     try:

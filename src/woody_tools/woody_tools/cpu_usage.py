@@ -66,6 +66,18 @@ class CpuAccounting:
         total = sum(cpu for _, cpu in per)
         lines = [f"CPU per node over {wall_s:.1f} s wall ({total:.1f} CPU-s in all, "
                  f"{100.0 * total / max(2.0 * wall_s, 1e-9):.0f} % of 2 cores):"]
+        children = self.children()
         for name, cpu in per:
-            lines.append(f"  {name:<12} {cpu:7.1f} s  {100.0 * cpu / max(total, 1e-9):5.1f} %")
+            part = ", ".join(f"{command} {seconds:.1f} s" for command, seconds in children.get(name, {}).items())
+            lines.append(f"  {name:<12} {cpu:7.1f} s  {100.0 * cpu / max(total, 1e-9):5.1f} %"
+                         + (f"  (child processes: {part})" if part else ""))
         return "\n".join(lines)
+
+    def children(self) -> dict[str, dict[str, float]]:
+        """CPU seconds of each root's descendants, by command name (e.g. line_sim's render process)."""
+        out: dict[str, dict[str, float]] = {}
+        for pid, (name, cpu, command) in self._seen.items():
+            if pid != self.roots[name] and cpu >= 0.05:
+                out.setdefault(name, {})
+                out[name][command] = out[name].get(command, 0.0) + cpu
+        return out

@@ -358,6 +358,7 @@ def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, monitor:
             signal.signal(sig, handler)
     _write_outputs(args, fillets, out, monitor, mesh_notes)
     if cpu is not None:
+        print(f"sim {monitor.sim_time:.1f} s in {wall:.1f} s wall: rtf {monitor.sim_time / max(wall, 1e-9):.2f}x")
         print(cpu.summary(wall))
     if error:
         print(f"woody run: {error}", file=sys.stderr)

@@ -107,6 +107,9 @@ class Grader(Node):
                 self.side_checker.reject("no camera_info on /top_camera/depth/camera_info yet; tracks skipped")
             return
         self.frame_id = msg.header.frame_id
+        odd = [t.id for t in msg.tracks if len(t.contour_uv) % 2]
+        if odd:
+            self.side_checker.reject(f"tracks {odd}: contour_uv of odd length (u, v pairs expected); those skipped")
         tracks = [TrackObservation(t.id, t.lane, np.frombuffer(t.contour_uv, np.int32).reshape(-1, 2), t.unseen)
                   for t in msg.tracks if len(t.contour_uv) >= 6 and len(t.contour_uv) % 2 == 0]
         self._publish(self.core.on_tracks(_seconds(msg.header.stamp), tracks, msg.ended_ids))
