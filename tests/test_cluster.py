@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 
+from woody_common.calibration import load_calibration
 from woody_sim.meshes import BUILTIN_DIR, generate_fillet, load_mesh
 from woody_tools import cluster
 from woody_tools.experiment import RunSpec
@@ -138,7 +139,8 @@ def test_worker_killed_mid_sweep_loses_and_doubles_nothing(dask_cluster, tmp_pat
             assert sweep.wait(240) == 0, (tmp_path / "sweep.log").read_text()[-3000:]
             assert len(client.scheduler_info(n_workers=-1)["workers"]) == 1
     rows = _rows(out / "runs.csv")  # asserts no key twice
-    assert sorted(rows) == sorted(("generated-70000", k, 100.0, lane, 20.0) for k in (0.0, 50.0, 100.0)
+    mass = load_calibration().total_mass_kg
+    assert sorted(rows) == sorted(("generated-70000", k, 100.0, lane, mass) for k in (0.0, 50.0, 100.0)
                                   for lane in range(1))
     assert all(r["status"] == "scored" for r in rows.values())
     assert "not computed" not in (tmp_path / "sweep.log").read_text()
