@@ -12,6 +12,7 @@ SUBCOMMANDS = [
     ("report", "report_command", "rebuild report.md and plots from a bag or a verdicts.csv"),
     ("bench", "bench", "benchmarks: `woody bench sim` and `woody bench vision`"),
     ("sweep", "sweep", "the paper's drop-test grid (meshes x k x speed), parallel and resumable; runs.csv, results.md"),
+    ("meshes", "meshes_command", "mesh sets: `woody meshes stats SPEC...` prints shape descriptors per mesh and per set"),
     ("calibrate", "calibrate", "tune the total mass M and the Φ threshold; writes them as the defaults"),
 ]
 """(subcommand, module in woody_tools with add_arguments(parser) and run(args) -> int, help)."""
