@@ -479,6 +479,15 @@ def _polar_radii(polygon: np.ndarray, centre: np.ndarray, theta: np.ndarray) -> 
     return np.where(valid, dist, 0.0).max(axis=1)
 
 
+def _rim_wiggle(rng: np.random.Generator, outline: np.ndarray, length: float) -> np.ndarray:
+    """Unit-sd irregularity at each outline point, correlated over millimetres of rim (not over rays)."""
+    closed = np.vstack([outline, outline[:1]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))]) * length
+    count = int(arc[-1] / 0.0005)
+    noise = _smooth_noise(rng, (count,), 8.0, "wrap") + 0.6 * _smooth_noise(rng, (count,), 3.0, "wrap")
+    return np.interp(arc[:-1], np.arange(count) * arc[-1] / count, noise / noise.std(), period=arc[-1])
+
+
 def _fillet_outline(rng: np.random.Generator, length: float, width: float) -> tuple[np.ndarray, np.ndarray]:
     """Outline (OUTLINE_POINTS, 2) in metres, star-shaped about the returned centre, with a wiggly rim.
 
@@ -490,9 +499,9 @@ def _fillet_outline(rng: np.random.Generator, length: float, width: float) -> tu
     centre = base.mean(axis=0)
     theta = np.linspace(0.0, 2.0 * np.pi, OUTLINE_POINTS, endpoint=False)
     radii = _polar_radii(base, centre, theta)
-    rim = rng.uniform(*RIM_WIGGLE_RANGE) / length
-    radii = radii + rim * (_smooth_noise(rng, theta.shape, 6.0, "wrap") + 0.7 * _smooth_noise(rng, theta.shape, 2.5, "wrap"))
-    points = centre + radii[:, None] * np.column_stack([np.cos(theta), np.sin(theta)])
+    rays = np.column_stack([np.cos(theta), np.sin(theta)])
+    radii = radii + rng.uniform(*RIM_WIGGLE_RANGE) / length * _rim_wiggle(rng, centre + radii[:, None] * rays, length)
+    points = centre + radii[:, None] * rays
     lo, hi = points.min(axis=0), points.max(axis=0)
     scale = np.array([length, width]) / (hi - lo)
     return (points - 0.5 * (lo + hi)) * scale, (centre - 0.5 * (lo + hi)) * scale
@@ -513,13 +522,15 @@ def _top_heights(rng: np.random.Generator, points: np.ndarray, outline: np.ndarr
     margin = np.clip(spatial.cKDTree(dense).query(points)[0] / rng.uniform(0.012, 0.022), 0.0, 1.0)
     edge = 1.0 - (1.0 - margin) ** rng.uniform(1.8, 2.8)
     floor = rng.uniform(0.25, 0.45)
-    along = floor + (1.0 - floor) * np.exp(-(((t - rng.uniform(0.28, 0.55)) / rng.uniform(0.28, 0.45)) ** 2))
+    along = floor + (1.0 - floor) * np.exp(-(((t - rng.uniform(0.28, 0.55)) / rng.uniform(0.35, 0.55)) ** 2))
+    ridge = v - rng.uniform(-0.4, 0.4) - rng.uniform(-0.4, 0.4) * (t - 0.5)
+    across = 1.0 - rng.uniform(0.2, 0.5) * np.clip(ridge, -1.2, 1.2) ** 2
     hump_t, hump_v = rng.uniform(0.2, 0.7), rng.uniform(-0.5, 0.5)
     hump = 1.0 + rng.uniform(0.1, 0.4) * np.exp(-(((t - hump_t) / 0.25) ** 2) - ((v - hump_v) / 0.35) ** 2)
     field = _smooth_noise(rng, (24, 48), 3.0)
     lumps = 1.0 + rng.uniform(0.05, 0.14) * ndimage.map_coordinates(
         field, [(v + 1.0) * 11.5, t * 47.0], order=1, mode="nearest")
-    core = edge * along * hump * lumps
+    core = edge * along * across * hump * lumps
     rim = rng.uniform(*RIM_HEIGHT_RANGE)
     return rim + (thickness - rim) * np.clip(core, 0.0, None) / core.max()
 
