@@ -9,7 +9,14 @@ import pytest
 import trimesh
 
 from woody_sim.mesh_stats import DESCRIPTOR_NAMES, describe, outside_range, summarize
-from woody_sim.meshes import BUILTIN_DIR, BUILTIN_REFERENCE_NAMES, FilletMesh, depth_map_to_mesh, generate_fillet, load_mesh
+from woody_sim.meshes import (
+    BUILTIN_DIR,
+    BUILTIN_REFERENCE_NAMES,
+    FilletMesh,
+    depth_map_to_mesh,
+    generate_fillet,
+    load_mesh,
+)
 
 GENERATED_SEEDS = range(24)
 
@@ -54,7 +61,8 @@ def test_stair_stepped_rim_is_rough_and_a_notch_lowers_solidity() -> None:
 
 
 def test_summary_and_range_check() -> None:
-    sets = [describe(FilletMesh(name=f"box{w}", mesh=trimesh.creation.box(extents=[0.2, w, 0.02]))) for w in (0.1, 0.08)]
+    boxes = [FilletMesh(name=f"box{w}", mesh=trimesh.creation.box(extents=[0.2, w, 0.02])) for w in (0.1, 0.08)]
+    sets = [describe(box) for box in boxes]
     summary = summarize(sets)
     assert summary["aspect_ratio"]["min"] == pytest.approx(2.0, rel=0.01)
     assert summary["aspect_ratio"]["max"] == pytest.approx(2.5, rel=0.01)

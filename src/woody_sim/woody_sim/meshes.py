@@ -11,10 +11,10 @@ experiments agree on what "length" and "leading end" mean:
 
 The paper's data set is depth-map based (PCA-aligned scans projected to depth
 maps, a GAN generating new depth maps, rebuilt as watertight meshes with a flat
-bottom). This module follows the same pipeline with a parametric generator in
-place of the GAN: :func:`generate_fillet` draws a teardrop depth map from a seed,
-:func:`depth_map_to_mesh` rebuilds it, :func:`scan_to_depth_map` imports point
-clouds. Every fillet also exposes a :class:`HeightMap` (its top surface seen from
+bottom). :func:`depth_map_to_mesh` rebuilds depth maps that way and
+:func:`scan_to_depth_map` imports point clouds; in place of the GAN,
+:func:`generate_fillet` builds a procedural fillet from a seed (a blunt,
+irregular outline with a smooth rim on a ringed mesh, ``docs/fillets.md``). Every fillet also exposes a :class:`HeightMap` (its top surface seen from
 above), which is what :mod:`woody_sim.fillet_model` slices into segments.
 """
 
@@ -539,24 +539,24 @@ def _ring_mesh(outline: np.ndarray, centre: np.ndarray, heights) -> trimesh.Trim
     """Watertight mesh on rays from ``centre`` to a star-shaped outline: ringed top, flat bottom, vertical rim wall.
 
     ``heights(points)`` gives the top surface; rings are denser towards the rim,
-    where the surface rounds off.
+    where the surface rounds off. The bottom repeats the top's rings at z = 0,
+    so no triangle is large (the height-map rasteriser's cost grows with it).
     """
     n = len(outline)
     rho = (np.arange(1, RINGS + 1) / RINGS) ** 0.7
-    rings = centre + rho[:, None, None] * (outline - centre)[None, :, :]
-    plan = np.vstack([centre[None, :], rings.reshape(-1, 2)])
+    plan = np.vstack([centre[None, :], (centre + rho[:, None, None] * (outline - centre)).reshape(-1, 2)])
     vertices = np.vstack([np.column_stack([plan, heights(plan)]), np.column_stack([plan, np.zeros(len(plan))])])
     k = np.arange(n)
     k1 = (k + 1) % n
-    fan = np.column_stack([np.zeros(n, int), 1 + k, 1 + k1])
-    strips = [np.column_stack([1 + j * n + k, 1 + (j + 1) * n + k, 1 + (j + 1) * n + k1]) for j in range(RINGS - 1)]
-    strips += [np.column_stack([1 + j * n + k, 1 + (j + 1) * n + k1, 1 + j * n + k1]) for j in range(RINGS - 1)]
-    top = np.vstack([fan] + strips)
-    bottom = top[:, ::-1] + len(plan)
-    rim_top, rim_bottom = 1 + (RINGS - 1) * n + k, 1 + (RINGS - 1) * n + k + len(plan)
-    rim_top1, rim_bottom1 = 1 + (RINGS - 1) * n + k1, 1 + (RINGS - 1) * n + k1 + len(plan)
-    wall = np.vstack([np.column_stack([rim_top, rim_bottom, rim_bottom1]), np.column_stack([rim_top, rim_bottom1, rim_top1])])
-    return trimesh.Trimesh(vertices, np.vstack([top, bottom, wall]), process=False)
+    inner, outer = 1 + np.arange(RINGS - 1)[:, None] * n, 1 + np.arange(1, RINGS)[:, None] * n
+    top = np.vstack([
+        np.column_stack([np.zeros(n, int), 1 + k, 1 + k1]),
+        np.column_stack([(inner + k).ravel(), (outer + k).ravel(), (outer + k1).ravel()]),
+        np.column_stack([(inner + k).ravel(), (outer + k1).ravel(), (inner + k1).ravel()]),
+    ])
+    rim, rim1, down = 1 + (RINGS - 1) * n + k, 1 + (RINGS - 1) * n + k1, len(plan)
+    wall = np.vstack([np.column_stack([rim, rim + down, rim1 + down]), np.column_stack([rim, rim1 + down, rim1])])
+    return trimesh.Trimesh(vertices, np.vstack([top, top[:, ::-1] + down, wall]), process=False)
 
 
 def generate_fillet(seed: int) -> FilletMesh:

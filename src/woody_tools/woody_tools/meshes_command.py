@@ -40,7 +40,8 @@ def _row(label: str, values: dict[str, float]) -> str:
 
 def _set_lines(spec: str, meshes: list[Descriptors]) -> list[str]:
     """The table of one set: a row per mesh, then mean, sd, min and max."""
-    lines = [f"set {spec}: {len(meshes)} meshes", f"{'mesh':<22}" + "".join(f"{_COLUMNS[k][0]:>10}" for k in DESCRIPTOR_NAMES)]
+    header = f"{'mesh':<22}" + "".join(f"{_COLUMNS[k][0]:>10}" for k in DESCRIPTOR_NAMES)
+    lines = [f"set {spec}: {len(meshes)} meshes", header]
     lines += [_row(d.name, d.values()) for d in meshes]
     summary = summarize(meshes)
     for stat in ("mean", "sd", "min", "max"):
