@@ -14,7 +14,8 @@ maps, a GAN generating new depth maps, rebuilt as watertight meshes with a flat
 bottom). :func:`depth_map_to_mesh` rebuilds depth maps that way and
 :func:`scan_to_depth_map` imports point clouds; in place of the GAN,
 :func:`generate_fillet` builds a procedural fillet from a seed (a blunt,
-irregular outline with a smooth rim on a ringed mesh, ``docs/fillets.md``). Every fillet also exposes a :class:`HeightMap` (its top surface seen from
+irregular outline with a smooth rim on a ringed mesh, ``docs/fillets.md``).
+Every fillet also exposes a :class:`HeightMap` (its top surface seen from
 above), which is what :mod:`woody_sim.fillet_model` slices into segments.
 """
 
@@ -512,8 +513,9 @@ def _top_heights(rng: np.random.Generator, points: np.ndarray, outline: np.ndarr
 
     Edges round off over a random margin from the rim (measured as distance to
     the outline, so the rounding is as wide at the ends as at the sides); along
-    the length the thickness peaks in the front half and thins to both ends; a
-    lopsided hump and smooth lumps make every profile different.
+    the length the thickness peaks in the wide half and thins to both ends,
+    across it follows an off-centre ridge; a lopsided hump and smooth lumps
+    make every profile different.
     """
     lo, hi = outline.min(axis=0), outline.max(axis=0)
     t = (points[:, 0] - lo[0]) / (hi[0] - lo[0])
@@ -571,7 +573,7 @@ def generate_fillet(seed: int) -> FilletMesh:
     rng = np.random.default_rng(int(seed))
     length, width, thickness = (rng.uniform(*r) for r in (LENGTH_RANGE, WIDTH_RANGE, THICKNESS_RANGE))
     outline, centre = _fillet_outline(rng, length, width)
-    height_rng = np.random.default_rng(rng.integers(2**63))
+    height_rng = np.random.default_rng(rng.integers(2**63))  # own stream: outline changes keep the thickness draws
     mesh = _ring_mesh(outline, centre, lambda plan: _top_heights(height_rng, plan, outline, thickness))
     return FilletMesh(name=f"generated-{int(seed):04d}", mesh=_centre(mesh), source=f"generated:{int(seed)}")
 
