@@ -15,6 +15,8 @@ too. Definitions (canonical frame: x = length, tip at +x):
 * solidity: outline area / convex-hull area;
 * rim roughness: outline perimeter / convex-hull perimeter;
 * thickness: highest point of the mesh above its bottom (m);
+* fullness: mean height over the footprint / thickness (a flat slab 1, a
+  dome lower: how the thickness is spread, which sets the segment masses);
 * area: area inside the outline (m²).
 """
 
@@ -54,6 +56,7 @@ class Descriptors:
     width_75: float
     width_90: float
     thickness_m: float
+    fullness: float
     area_m2: float
 
     def values(self) -> dict[str, float]:
@@ -122,8 +125,8 @@ def widths_across(outline: np.ndarray, xs: np.ndarray) -> np.ndarray:
     return widths
 
 
-def describe_outline(outline: np.ndarray, thickness: float, name: str = "") -> Descriptors:
-    """Descriptors of one footprint outline (metres, canonical frame) and the mesh thickness."""
+def describe_outline(outline: np.ndarray, thickness: float, fullness: float, name: str = "") -> Descriptors:
+    """Descriptors of one footprint outline (metres, canonical frame), the mesh thickness and fullness."""
     x_min, x_max = float(outline[:, 0].min()), float(outline[:, 0].max())
     length = x_max - x_min
     scan = widths_across(outline, np.linspace(x_min, x_max, _WIDTH_SCAN + 2)[1:-1])
@@ -139,6 +142,7 @@ def describe_outline(outline: np.ndarray, thickness: float, name: str = "") -> D
         rim_roughness=perimeter(outline) / perimeter(hull),
         **{f"width_{round(p * 100)}": float(w) for p, w in zip(WIDTH_STATIONS, stations)},
         thickness_m=float(thickness),
+        fullness=float(fullness),
         area_m2=area(outline),
     )
 
@@ -146,7 +150,8 @@ def describe_outline(outline: np.ndarray, thickness: float, name: str = "") -> D
 def describe(fillet: FilletMesh) -> Descriptors:
     """Descriptors of one fillet, its footprint rasterised at :data:`FOOTPRINT_PIXEL`."""
     height_map = rasterize_top(fillet.mesh.vertices, fillet.mesh.faces, FOOTPRINT_PIXEL)
-    return describe_outline(footprint_outline(height_map), fillet.thickness, fillet.name)
+    fullness = height_map.heights[height_map.heights > FOOTPRINT_HEIGHT_M].mean() / fillet.thickness
+    return describe_outline(footprint_outline(height_map), fillet.thickness, fullness, fillet.name)
 
 
 def summarize(descriptors: list[Descriptors]) -> dict[str, dict[str, float]]:

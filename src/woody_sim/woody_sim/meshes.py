@@ -521,12 +521,12 @@ def _top_heights(rng: np.random.Generator, points: np.ndarray, outline: np.ndarr
     t = (points[:, 0] - lo[0]) / (hi[0] - lo[0])
     v = 2.0 * (points[:, 1] - 0.5 * (lo[1] + hi[1])) / (hi[1] - lo[1])
     dense = np.vstack([np.linspace(p, q, 4, endpoint=False) for p, q in zip(outline, np.roll(outline, -1, axis=0))])
-    margin = np.clip(spatial.cKDTree(dense).query(points)[0] / rng.uniform(0.012, 0.022), 0.0, 1.0)
+    margin = np.clip(spatial.cKDTree(dense).query(points)[0] / rng.uniform(0.022, 0.038), 0.0, 1.0)
     edge = 1.0 - (1.0 - margin) ** rng.uniform(1.8, 2.8)
-    floor = rng.uniform(0.25, 0.45)
+    floor = rng.uniform(0.12, 0.32)
     along = floor + (1.0 - floor) * np.exp(-(((t - rng.uniform(0.28, 0.55)) / rng.uniform(0.35, 0.55)) ** 2))
     ridge = v - rng.uniform(-0.4, 0.4) - rng.uniform(-0.4, 0.4) * (t - 0.5)
-    across = 1.0 - rng.uniform(0.2, 0.5) * np.clip(ridge, -1.2, 1.2) ** 2
+    across = 1.0 - rng.uniform(0.3, 0.6) * np.clip(ridge, -1.2, 1.2) ** 2
     hump_t, hump_v = rng.uniform(0.2, 0.7), rng.uniform(-0.5, 0.5)
     hump = 1.0 + rng.uniform(0.1, 0.4) * np.exp(-(((t - hump_t) / 0.25) ** 2) - ((v - hump_v) / 0.35) ** 2)
     field = _smooth_noise(rng, (24, 48), 3.0)

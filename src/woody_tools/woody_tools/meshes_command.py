@@ -20,6 +20,7 @@ _COLUMNS = {  # descriptor -> (column title, scale, format)
     "width_75": ("w75", 1.0, "{:.2f}"),
     "width_90": ("w90", 1.0, "{:.2f}"),
     "thickness_m": ("thick_mm", 1000.0, "{:.1f}"),
+    "fullness": ("full", 1.0, "{:.2f}"),
     "area_m2": ("area_cm2", 1e4, "{:.0f}"),
 }
 
