@@ -26,3 +26,13 @@ def test_bad_spec_is_one_line_and_exit_2(capsys) -> None:
     assert main(["meshes", "stats", "generated:0"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("woody meshes stats: mesh spec 'generated:0'") and "\n" not in err
+
+
+def test_height_threshold_gives_the_segmenters_smaller_footprint(tmp_path, capsys) -> None:
+    silhouette, segmenter = tmp_path / "a.json", tmp_path / "b.json"
+    assert main(["meshes", "stats", "generated:1:5", "--json", str(silhouette)]) == 0
+    assert main(["meshes", "stats", "generated:1:5", "--json", str(segmenter), "--height-threshold", "0.005"]) == 0
+    areas = [json.loads(p.read_text())["sets"][0]["meshes"][0]["area_m2"] for p in (silhouette, segmenter)]
+    assert areas[1] < 0.95 * areas[0]
+    assert main(["meshes", "stats", "generated:1", "--height-threshold", "-1"]) == 2
+    assert "--height-threshold" in capsys.readouterr().err

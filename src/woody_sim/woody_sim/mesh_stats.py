@@ -147,11 +147,15 @@ def describe_outline(outline: np.ndarray, thickness: float, fullness: float, nam
     )
 
 
-def describe(fillet: FilletMesh) -> Descriptors:
-    """Descriptors of one fillet, its footprint rasterised at :data:`FOOTPRINT_PIXEL`."""
+def describe(fillet: FilletMesh, threshold: float = FOOTPRINT_HEIGHT_M) -> Descriptors:
+    """Descriptors of one fillet, its footprint rasterised at :data:`FOOTPRINT_PIXEL`.
+
+    ``threshold`` is the height (m) the footprint starts at: the default gives
+    the plan-view silhouette, the segmenter's 5 mm the contour Φ is taken on.
+    """
     height_map = rasterize_top(fillet.mesh.vertices, fillet.mesh.faces, FOOTPRINT_PIXEL)
-    fullness = height_map.heights[height_map.heights > FOOTPRINT_HEIGHT_M].mean() / fillet.thickness
-    return describe_outline(footprint_outline(height_map), fillet.thickness, fullness, fillet.name)
+    fullness = height_map.heights[height_map.heights > threshold].mean() / fillet.thickness
+    return describe_outline(footprint_outline(height_map, threshold), fillet.thickness, fullness, fillet.name)
 
 
 def summarize(descriptors: list[Descriptors]) -> dict[str, dict[str, float]]:

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from woody_sim.mesh_stats import DESCRIPTOR_NAMES, Descriptors, describe, summarize
+from woody_sim.mesh_stats import DESCRIPTOR_NAMES, FOOTPRINT_HEIGHT_M, Descriptors, describe, summarize
 from woody_sim.meshes import load_mesh_set
 
 _COLUMNS = {  # descriptor -> (column title, scale, format)
@@ -32,6 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="a mesh set as `woody run --meshes` takes it: builtin, generated:N[:SEED], a folder, "
                             "a mesh file, or a comma-separated mix; each SPEC is summarised as one set")
     stats.add_argument("--json", default=None, metavar="FILE", help="also write every figure to this JSON file")
+    stats.add_argument("--height-threshold", type=float, default=FOOTPRINT_HEIGHT_M, metavar="M",
+                       help=f"footprint = heights above this (m); default {FOOTPRINT_HEIGHT_M} (the silhouette), "
+                            "0.005 gives the segmenter's view")
 
 
 def _row(label: str, values: dict[str, float]) -> str:
@@ -50,20 +53,24 @@ def _set_lines(spec: str, meshes: list[Descriptors]) -> list[str]:
     return lines
 
 
-def _describe_spec(spec: str) -> list[Descriptors]:
+def _describe_spec(spec: str, threshold: float) -> list[Descriptors]:
     fillets, errors = load_mesh_set(spec)
     for error in errors:
         print(f"woody meshes stats: skipped {error}", file=sys.stderr)
     if not fillets:
         raise ValueError(f"mesh spec '{spec}': no usable meshes")
-    return [describe(fillet) for fillet in fillets]
+    return [describe(fillet, threshold) for fillet in fillets]
 
 
 def run(args: argparse.Namespace) -> int:
-    report = {"sets": []}
+    if not 0.0 <= args.height_threshold < 0.02:
+        print(f"woody meshes stats: --height-threshold must be in [0, 0.02) m, got {args.height_threshold}",
+              file=sys.stderr)
+        return 2
+    report = {"height_threshold_m": args.height_threshold, "sets": []}
     for spec in args.specs:
         try:
-            meshes = _describe_spec(spec)
+            meshes = _describe_spec(spec, args.height_threshold)
         except ValueError as exc:
             print(f"woody meshes stats: {exc}", file=sys.stderr)
             return 2
