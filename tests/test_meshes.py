@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from woody_sim.mesh_stats import describe
 from woody_sim.meshes import (
     BUILTIN_DIR,
     BUILTIN_REFERENCE_NAMES,
@@ -63,11 +64,27 @@ def test_generated_fillets_are_watertight_real_sized_and_tip_forward() -> None:
     for seed in range(4):
         fillet = generate_fillet(seed)
         assert fillet.mesh.is_watertight and fillet.mesh.is_volume
-        assert LENGTH_RANGE[0] * 0.95 <= fillet.length <= LENGTH_RANGE[1]
-        assert WIDTH_RANGE[0] * 0.85 <= fillet.width <= WIDTH_RANGE[1] * 1.15
-        assert THICKNESS_RANGE[0] <= fillet.thickness <= THICKNESS_RANGE[1] + 1e-9
+        assert LENGTH_RANGE[0] <= fillet.length <= LENGTH_RANGE[1]
+        assert WIDTH_RANGE[0] <= fillet.width <= WIDTH_RANGE[1]
+        assert THICKNESS_RANGE[0] <= fillet.thickness <= THICKNESS_RANGE[1]
+        assert fillet.height_map.heights.max() == pytest.approx(fillet.thickness, rel=0.02)
+        lo, hi = fillet.mesh.bounds
+        assert lo[2] == 0.0 and (lo[:2] + hi[:2]) == pytest.approx([0.0, 0.0], abs=1e-12)
         wide_end, tip_end = end_widths(fillet)
         assert tip_end < wide_end
+
+
+def test_generated_top_surface_never_folds_over() -> None:
+    """Every face is top (normal up), bottom (straight down) or rim wall (horizontal normal): no overhangs."""
+    for seed in range(12):
+        nz = generate_fillet(seed).mesh.face_normals[:, 2]
+        top, bottom, wall = nz > 1e-6, np.isclose(nz, -1.0), np.abs(nz) < 1e-6
+        assert (top | bottom | wall).all(), f"seed {seed}: {np.count_nonzero(~(top | bottom | wall))} folded faces"
+
+
+def test_generated_rims_are_smooth_not_stair_stepped() -> None:
+    for seed in range(3):
+        assert describe(generate_fillet(seed)).rim_roughness < 1.06
 
 
 def test_generator_is_reproducible_per_seed() -> None:

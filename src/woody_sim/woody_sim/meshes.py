@@ -11,10 +11,11 @@ experiments agree on what "length" and "leading end" mean:
 
 The paper's data set is depth-map based (PCA-aligned scans projected to depth
 maps, a GAN generating new depth maps, rebuilt as watertight meshes with a flat
-bottom). This module follows the same pipeline with a parametric generator in
-place of the GAN: :func:`generate_fillet` draws a teardrop depth map from a seed,
-:func:`depth_map_to_mesh` rebuilds it, :func:`scan_to_depth_map` imports point
-clouds. Every fillet also exposes a :class:`HeightMap` (its top surface seen from
+bottom). :func:`depth_map_to_mesh` rebuilds depth maps that way and
+:func:`scan_to_depth_map` imports point clouds; in place of the GAN,
+:func:`generate_fillet` builds a procedural fillet from a seed (a blunt,
+irregular outline with a smooth rim on a ringed mesh, ``docs/fillets.md``).
+Every fillet also exposes a :class:`HeightMap` (its top surface seen from
 above), which is what :mod:`woody_sim.fillet_model` slices into segments.
 """
 
@@ -28,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from scipy import ndimage
+from scipy import interpolate, ndimage, spatial
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl")
 BUILTIN_DIR = Path(__file__).resolve().parent / "meshes"
@@ -36,10 +37,18 @@ BUILTIN_REFERENCE_NAMES = ("seed0000", "seed0001", "seed0002")
 BUILTIN_GENERATED_SEEDS = (0, 1, 2)
 """Seeds of the generated fillets that ``builtin`` adds to the three reference meshes."""
 
-LENGTH_RANGE = (0.17, 0.22)
-WIDTH_RANGE = (0.08, 0.11)
-THICKNESS_RANGE = (0.020, 0.035)
-"""Real fillet dimensions (m) the generator draws from (cf. the reference meshes)."""
+LENGTH_RANGE = (0.17, 0.208)
+WIDTH_RANGE = (0.094, 0.110)
+THICKNESS_RANGE = (0.021, 0.031)
+"""Fillet dimensions (m) the generator draws from: they bracket the reference meshes (docs/fillets.md)."""
+RIM_HEIGHT_RANGE = (0.0015, 0.003)
+"""Height (m) of the rounded-off rim above the belt (the reference meshes: 2-3 mm)."""
+RIM_WIGGLE_RANGE = (0.0007, 0.0013)
+"""Standard deviation (m) of the rim's small irregularities across the outline."""
+OUTLINE_POINTS = 512
+"""Rays (outline vertices) of a generated fillet."""
+RINGS = 14
+"""Rings of top-surface vertices between the centre and the rim of a generated fillet."""
 
 HEIGHT_MAP_PIXEL = 0.0005
 """Resolution (m) of the height map rasterised from a loaded mesh."""
@@ -475,58 +484,153 @@ def depth_map_to_mesh(depth: np.ndarray, pixel_size: float | tuple[float, float]
     return trimesh.Trimesh(vertices, np.vstack(faces), process=False)
 
 
-def _smooth_noise(rng: np.random.Generator, shape: tuple[int, ...], sigma: float) -> np.ndarray:
+def _smooth_noise(rng: np.random.Generator, shape: tuple[int, ...], sigma: float, mode: str = "reflect") -> np.ndarray:
     """Low-frequency noise with unit standard deviation (Gaussian-filtered white noise)."""
-    field = ndimage.gaussian_filter(rng.standard_normal(shape), sigma, mode="reflect")
+    field = ndimage.gaussian_filter(rng.standard_normal(shape), sigma, mode=mode)
     return field / max(field.std(), 1e-12)
 
 
-def generate_depth_map(seed: int, shape: tuple[int, int] = (64, 128)) -> tuple[np.ndarray, float]:
-    """A random fillet depth map (heights in m, tip at +x) and its square pixel size (m).
+def _bumps(rng: np.random.Generator, t: np.ndarray, count: int, amplitude: float) -> np.ndarray:
+    """Sum of ``count`` Gaussian bumps of random sign, place and width along t in [0, 1]: lobes and shoulders."""
+    out = np.zeros_like(t)
+    for _ in range(count):
+        centre, spread = rng.uniform(0.08, 0.92), rng.uniform(0.05, 0.15)
+        out += rng.uniform(-amplitude, amplitude) * np.exp(-(((t - centre) / spread) ** 2))
+    return out
 
-    Teardrop outline: the half-width follows sin(pi t^p)^q along the length
-    (t = 0 at the rounded wide end, 1 at the narrow tip), each side with its own
-    smooth ripple and a slightly bent centre line; the thickness peaks in a
-    lopsided hump towards the wide half and falls to rounded edges across;
-    smooth 2-D noise adds the natural lumps.
+
+def _base_outline(rng: np.random.Generator, n: int) -> np.ndarray:
+    """A blunt fillet outline (n points per side, unit length along x, tip at +x) as a closed CCW polygon.
+
+    The full width follows a monotone spline through random widths at fixed
+    stations (wide trailing end, broad shoulders, a blunt leading end that
+    stays wide), rounded off at both ends by quarter-ellipse caps; each side
+    gets its own lobes and the centre line a slight bend.
     """
-    rng = np.random.default_rng(seed)
-    ny, nx = shape
-    length = rng.uniform(*LENGTH_RANGE)
-    width = rng.uniform(*WIDTH_RANGE)
-    thickness = rng.uniform(*THICKNESS_RANGE)
-    pixel = max(length / (nx - 6), width * 1.3 / (ny - 6))
-    x = (np.arange(nx) - (nx - 1) / 2.0) * pixel
-    y = (np.arange(ny) - (ny - 1) / 2.0) * pixel
-    t = np.clip((x + length / 2.0) / length, 0.0, 1.0)
-    p_out, q_out = rng.uniform(0.5, 0.72), rng.uniform(0.55, 0.85)
-    half = 0.5 * width * np.sin(np.pi * t**p_out) ** q_out
-    ripple = 0.07 * _smooth_noise(rng, (2, nx), sigma=(0.0, nx / 12.0))
-    centre = width * rng.uniform(-0.08, 0.08) * np.sin(np.pi * t) ** 2
-    rel = y[:, None] - centre[None, :]
-    side_half = np.where(rel >= 0, (half * (1.0 + ripple[0]))[None, :], (half * (1.0 - ripple[1]))[None, :])
-    v = np.abs(rel) / np.maximum(side_half, 1e-9)
-    inside = (v < 1.0) & (t[None, :] > 0.0) & (t[None, :] < 1.0)
-    p_thk, q_thk = rng.uniform(0.6, 0.85), rng.uniform(0.45, 0.7)
-    along = np.sin(np.pi * t**p_thk) ** q_thk
-    r_exp, e_exp = rng.uniform(1.8, 2.6), rng.uniform(0.4, 0.6)
-    across = np.clip(1.0 - v**r_exp, 0.0, 1.0) ** e_exp
-    hump_t, hump_v = rng.uniform(0.3, 0.6), rng.uniform(-0.35, 0.35)
-    hump = np.exp(-(((t[None, :] - hump_t) / 0.2) ** 2) - ((rel / np.maximum(side_half, 1e-9) - hump_v) / 0.45) ** 2)
-    lumps = 1.0 + 0.12 * _smooth_noise(rng, (ny, nx), sigma=6.0)
-    heights = np.where(inside, along[None, :] * across * (1.0 + rng.uniform(0.2, 0.5) * hump) * lumps, 0.0)
-    heights *= thickness / heights.max()
-    heights = np.where(inside, np.maximum(heights, 0.0008), 0.0)
-    return heights, float(pixel)
+    t = 0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, n))
+    knots = np.array([0.35, 0.55, 0.88, 0.90, 0.85, 0.58, 0.38, 0.28]) + rng.uniform(0.0, 1.0, 8) * np.array(
+        [0.25, 0.25, 0.12, 0.10, 0.15, 0.24, 0.22, 0.2])
+    body = interpolate.PchipInterpolator([0.0, 0.1, 0.25, 0.4, 0.55, 0.75, 0.9, 1.0], np.minimum(knots, 1.0))(t)
+    tail_cap, tip_cap = rng.uniform(0.08, 0.18), rng.uniform(0.04, 0.10)
+    cap = np.sqrt(1.0 - (1.0 - np.clip(t / tail_cap, 0.0, 1.0)) ** 2)
+    cap *= np.sqrt(1.0 - (1.0 - np.clip((1.0 - t) / tip_cap, 0.0, 1.0)) ** 2)
+    half = 0.5 * body * cap / rng.uniform(1.75, 2.05)
+    centre = rng.uniform(-0.03, 0.03) * np.sin(np.pi * t)
+    upper = centre + half * (1.0 + _bumps(rng, t, 3, 0.12))
+    lower = centre - half * (1.0 + _bumps(rng, t, 3, 0.12))
+    return np.vstack([np.column_stack([t, lower]), np.column_stack([t[::-1], upper[::-1]])[1:-1]])
+
+
+def _polar_radii(polygon: np.ndarray, centre: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Distance from ``centre`` to the farthest crossing of the polygon along each ray (a star-shaped envelope)."""
+    a = polygon - centre
+    b = np.roll(a, -1, axis=0)
+    d = np.column_stack([np.cos(theta), np.sin(theta)])
+    e = b - a
+    denom = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dist = (a[None, :, 0] * e[None, :, 1] - a[None, :, 1] * e[None, :, 0]) / denom
+        along = (a[None, :, 0] * d[:, None, 1] - a[None, :, 1] * d[:, None, 0]) / denom
+    valid = (np.abs(denom) > 1e-12) & (along >= 0.0) & (along <= 1.0) & (dist > 0.0)
+    return np.where(valid, dist, 0.0).max(axis=1)
+
+
+def _rim_wiggle(rng: np.random.Generator, outline: np.ndarray, length: float) -> np.ndarray:
+    """Unit-sd irregularity at each outline point, correlated over millimetres of rim (not over rays)."""
+    closed = np.vstack([outline, outline[:1]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))]) * length
+    count = int(arc[-1] / 0.0005)
+    noise = _smooth_noise(rng, (count,), 8.0, "wrap") + 0.6 * _smooth_noise(rng, (count,), 3.0, "wrap")
+    return np.interp(arc[:-1], np.arange(count) * arc[-1] / count, noise / noise.std(), period=arc[-1])
+
+
+def _fillet_outline(rng: np.random.Generator, length: float, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Outline (OUTLINE_POINTS, 2) in metres, star-shaped about the returned centre, with a wiggly rim.
+
+    The base outline is resampled on rays from its centroid, so every later
+    step (rim wiggle, scaling to length x width) keeps it star-shaped and the
+    mesh built on the rays cannot fold.
+    """
+    base = _base_outline(rng, OUTLINE_POINTS // 2)
+    centre = base.mean(axis=0)
+    theta = np.linspace(0.0, 2.0 * np.pi, OUTLINE_POINTS, endpoint=False)
+    radii = _polar_radii(base, centre, theta)
+    rays = np.column_stack([np.cos(theta), np.sin(theta)])
+    radii = radii + rng.uniform(*RIM_WIGGLE_RANGE) / length * _rim_wiggle(rng, centre + radii[:, None] * rays, length)
+    points = centre + radii[:, None] * rays
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    scale = np.array([length, width]) / (hi - lo)
+    return (points - 0.5 * (lo + hi)) * scale, (centre - 0.5 * (lo + hi)) * scale
+
+
+def _top_heights(rng: np.random.Generator, points: np.ndarray, outline: np.ndarray, thickness: float) -> np.ndarray:
+    """Heights (m) of the top surface at points inside the outline, peaking at exactly ``thickness``.
+
+    Edges round off over a random margin from the rim (measured as distance to
+    the outline, so the rounding is as wide at the ends as at the sides); along
+    the length the thickness peaks in the wide half and thins to both ends,
+    across it follows an off-centre ridge; a lopsided hump and smooth lumps
+    make every profile different.
+    """
+    lo, hi = outline.min(axis=0), outline.max(axis=0)
+    t = (points[:, 0] - lo[0]) / (hi[0] - lo[0])
+    v = 2.0 * (points[:, 1] - 0.5 * (lo[1] + hi[1])) / (hi[1] - lo[1])
+    dense = np.vstack([np.linspace(p, q, 4, endpoint=False) for p, q in zip(outline, np.roll(outline, -1, axis=0))])
+    margin = np.clip(spatial.cKDTree(dense).query(points)[0] / rng.uniform(0.022, 0.038), 0.0, 1.0)
+    edge = 1.0 - (1.0 - margin) ** rng.uniform(1.8, 2.8)
+    floor = rng.uniform(0.12, 0.32)
+    along = floor + (1.0 - floor) * np.exp(-(((t - rng.uniform(0.28, 0.55)) / rng.uniform(0.35, 0.55)) ** 2))
+    ridge = v - rng.uniform(-0.4, 0.4) - rng.uniform(-0.4, 0.4) * (t - 0.5)
+    across = 1.0 - rng.uniform(0.3, 0.6) * np.clip(ridge, -1.2, 1.2) ** 2
+    hump_t, hump_v = rng.uniform(0.2, 0.7), rng.uniform(-0.5, 0.5)
+    hump = 1.0 + rng.uniform(0.1, 0.4) * np.exp(-(((t - hump_t) / 0.25) ** 2) - ((v - hump_v) / 0.35) ** 2)
+    field = _smooth_noise(rng, (24, 48), 3.0)
+    lumps = 1.0 + rng.uniform(0.05, 0.14) * ndimage.map_coordinates(
+        field, [(v + 1.0) * 11.5, t * 47.0], order=1, mode="nearest")
+    core = edge * along * across * hump * lumps
+    rim = rng.uniform(*RIM_HEIGHT_RANGE)
+    return rim + (thickness - rim) * np.clip(core, 0.0, None) / core.max()
+
+
+def _ring_mesh(outline: np.ndarray, centre: np.ndarray, heights) -> trimesh.Trimesh:
+    """Watertight mesh on rays from ``centre`` to a star-shaped outline: ringed top, flat bottom, vertical rim wall.
+
+    ``heights(points)`` gives the top surface; rings are denser towards the rim,
+    where the surface rounds off. The bottom repeats the top's rings at z = 0,
+    so no triangle is large (the height-map rasteriser's cost grows with it).
+    """
+    n = len(outline)
+    rho = (np.arange(1, RINGS + 1) / RINGS) ** 0.7
+    plan = np.vstack([centre[None, :], (centre + rho[:, None, None] * (outline - centre)).reshape(-1, 2)])
+    vertices = np.vstack([np.column_stack([plan, heights(plan)]), np.column_stack([plan, np.zeros(len(plan))])])
+    k = np.arange(n)
+    k1 = (k + 1) % n
+    inner, outer = 1 + np.arange(RINGS - 1)[:, None] * n, 1 + np.arange(1, RINGS)[:, None] * n
+    top = np.vstack([
+        np.column_stack([np.zeros(n, int), 1 + k, 1 + k1]),
+        np.column_stack([(inner + k).ravel(), (outer + k).ravel(), (outer + k1).ravel()]),
+        np.column_stack([(inner + k).ravel(), (outer + k1).ravel(), (inner + k1).ravel()]),
+    ])
+    rim, rim1, down = 1 + (RINGS - 1) * n + k, 1 + (RINGS - 1) * n + k1, len(plan)
+    wall = np.vstack([np.column_stack([rim, rim + down, rim1 + down]), np.column_stack([rim, rim1 + down, rim1])])
+    return trimesh.Trimesh(vertices, np.vstack([top, top[:, ::-1] + down, wall]), process=False)
 
 
 def generate_fillet(seed: int) -> FilletMesh:
-    """A reproducible synthetic fillet (same seed, same mesh) sized to real fillet ranges."""
+    """A reproducible synthetic fillet (same seed, same mesh) with a realistic outline and real-fillet size.
+
+    Procedural, not a statistical shape model: three reference meshes cannot
+    estimate the modes of real shape variation, so the parameter ranges are
+    chosen to bracket them instead (``docs/fillets.md``).
+    """
     if int(seed) != seed or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    depth, pixel = generate_depth_map(int(seed))
-    mesh = _centre(depth_map_to_mesh(depth, pixel))
-    return FilletMesh(name=f"generated-{int(seed):04d}", mesh=mesh, source=f"generated:{int(seed)}")
+    rng = np.random.default_rng(int(seed))
+    length, width, thickness = (rng.uniform(*r) for r in (LENGTH_RANGE, WIDTH_RANGE, THICKNESS_RANGE))
+    outline, centre = _fillet_outline(rng, length, width)
+    height_rng = np.random.default_rng(rng.integers(2**63))  # own stream: outline changes keep the thickness draws
+    mesh = _ring_mesh(outline, centre, lambda plan: _top_heights(height_rng, plan, outline, thickness))
+    return FilletMesh(name=f"generated-{int(seed):04d}", mesh=_centre(mesh), source=f"generated:{int(seed)}")
 
 
 # --------------------------------------------------------------------------- scans
