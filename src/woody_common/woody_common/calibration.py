@@ -12,6 +12,7 @@ with :func:`load_calibration`; nothing rewrites Python source.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -78,7 +79,7 @@ def load_calibration(path: str | Path | None = None) -> Calibration:
 def write_calibration(calibration: Calibration, path: str | Path | None = None, header: str = "") -> Path:
     """Write ``calibration`` as a ROS 2 parameters file (atomically: a reader never sees half a file)."""
     path = Path(path) if path is not None else DEFAULT_PATH
-    values = asdict(calibration)
+    values = {name: float(value) for name, value in asdict(calibration).items() if name != "provenance"}
     data = {_node_key(node): {"ros__parameters": {param: values[name] for name, param in names.items()}}
             for node, names in _SECTIONS.items()}
     data[_node_key(_PROVENANCE)] = {"ros__parameters": {k: _plain(v) for k, v in calibration.provenance.items()}}
@@ -90,7 +91,9 @@ def write_calibration(calibration: Calibration, path: str | Path | None = None, 
 
 
 def _plain(value):
-    """A provenance value as a ROS parameter can hold it: numbers and strings stay, the rest becomes text."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-        return str(value)
-    return value
+    """A provenance value as a ROS parameter can hold it: numbers (numpy's too) and strings stay, the rest is text."""
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        return int(value)
+    if isinstance(value, numbers.Real):
+        return float(value)
+    return value if isinstance(value, str) else str(value)
