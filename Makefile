@@ -8,7 +8,7 @@ setup:
 	@scripts/setup.sh $(VENV)
 
 demo: setup
-	$(VENV)/bin/woody run --fillets 12 --out bags/demo
+	$(VENV)/bin/woody run --fillets 12 --out bags/demo --force
 
 test: setup
 	$(VENV)/bin/python -m pytest tests $(PYTEST_ARGS)
