@@ -146,6 +146,40 @@ def best_threshold(normal: Sequence[float], severe: Sequence[float]) -> tuple[fl
 
 # ------------------------------------------------------------------ selection helpers
 
+SPEED_GAIN_MIN = 0.05
+"""Issue 9: NMDM(k=0) at 130 FPM at least this much above its 100 FPM value (paper +0.155)."""
+PHI_SPEED_DROP_MIN = 0.10
+"""Issue 9: Φ(k=0) at 130 FPM at least 10 % below its 100 FPM value (paper −22 %)."""
+PHI_SD_FACTOR = 1.5
+"""Issue 10: the Φ sd per class within this factor of the paper's (100 FPM)."""
+
+
+def physics_checks(rows: list[dict], side_rows: list[dict]) -> list[tuple[str, bool | None, str]]:
+    """The physics calibration's targets: k = 0 speed effects, BE falling with k, the spread of Φ per class."""
+    checks = []
+    n = {s: mean_sd(_select(side_rows, s, 0.0, column="nmdm"))[0] for s in (100.0, 130.0)}
+    if all(math.isfinite(v) for v in n.values()):
+        checks.append((f"side: NMDM(k=0) at 130 FPM ≥ {SPEED_GAIN_MIN} above 100 FPM", n[130.0] - n[100.0] >= SPEED_GAIN_MIN,
+                       f"{n[130.0]:.3f} − {n[100.0]:.3f} = {n[130.0] - n[100.0]:+.3f} (paper +0.155)"))
+    be = [(k, mean_sd(_select(side_rows, 100.0, k, column="be"))[0]) for k in sorted({r["k"] for r in side_rows})]
+    be = [(k, v) for k, v in be if math.isfinite(v)]
+    if len(be) >= 2:
+        checks.append(("side 100 FPM: BE falls monotonically with k", all(b < a for (_, a), (_, b) in zip(be, be[1:])),
+                       ", ".join(f"k={k:g}: {v:.1f}" for k, v in be) + " (paper k=0 37.6, k=100 19.3)"))
+    phi = {s: mean_sd(_select(rows, s, 0.0))[0] for s in (100.0, 130.0)}
+    if all(math.isfinite(v) for v in phi.values()):
+        drop = 1.0 - phi[130.0] / phi[100.0]
+        checks.append((f"top: Φ(k=0) at 130 FPM ≥ {PHI_SPEED_DROP_MIN:.0%} below 100 FPM", drop >= PHI_SPEED_DROP_MIN,
+                       f"{phi[130.0]:.2f} vs {phi[100.0]:.2f}: {drop:.0%} lower (paper 14.91 vs 19.12: 22 %)"))
+    for k in (0.0, 100.0):
+        sd, paper = mean_sd(_select(rows, 100.0, k))[1], PAPER_TOP.get(100.0, {}).get(k)
+        if paper is not None and math.isfinite(sd):
+            ratio = sd / paper[1]
+            checks.append((f"top 100 FPM: Φ sd at k={k:g} within ×{PHI_SD_FACTOR} of the paper's",
+                           1.0 / PHI_SD_FACTOR <= ratio <= PHI_SD_FACTOR, f"{sd:.2f} vs {paper[1]:.2f} (×{ratio:.2f})"))
+    return checks
+
+
 def _select(rows, speed=None, k=None, lane=None, column="phi"):
     out = []
     for r in rows:
@@ -305,6 +339,7 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
         if pairs:
             checks.append(("top: every class scores lower at 130 than at 100 FPM", all(b < a for _, a, b in pairs),
                            ", ".join(f"k={k:g}: {b:.2f} vs {a:.2f}" for k, a, b in pairs)))
+    checks += physics_checks(rows, side_rows)
 
     # ---- lanes table
     L.append("## Lanes (paper Table lane_analysis)\n")
