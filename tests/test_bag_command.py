@@ -11,7 +11,6 @@ import subprocess
 from pathlib import Path
 
 import pytest
-
 from test_recorder import _bag_of_known
 
 from woody_tools.graph import entry_point

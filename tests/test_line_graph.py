@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import spin_until
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from conftest import spin_until
 from woody_tools.graph import NodeProcess
 
 
@@ -17,6 +17,7 @@ def _seconds(stamp) -> float:
 def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_path):
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import CameraInfo, Image
+
     from woody_msgs.msg import FilletSpawn
 
     duration = 3.0
@@ -106,10 +107,9 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
 
 def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_domain, tmp_path):
     """16UC1 millimetre depth with 0 where nothing was measured, noisy colour, a few dropped frames at most."""
-    from sensor_msgs.msg import Image
-
     from geometry_msgs.msg import PoseStamped
     from scipy.spatial.transform import Rotation
+    from sensor_msgs.msg import Image
 
     frames: dict[str, list] = {"depth": [], "color": []}
     best_effort = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)

@@ -13,7 +13,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest import REPO
 
 sys.path.insert(0, str(REPO / "tests" / "helpers"))
@@ -240,5 +239,5 @@ def test_a_damaged_chunk_stops_reading_with_one_line(tmp_path):
     data[middle:middle + 32] = bytes(32)
     full.write_bytes(bytes(data))
     with pytest.raises(BagError, match=r"full\.mcap: corrupt after \d+ messages at t=[\d.]+s \("):
-        for topic, type_name, raw, _ in read_bag(full):
+        for _topic, type_name, raw, _ in read_bag(full):
             decode(type_name, raw)

@@ -11,10 +11,9 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import REPO, spin_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
-
-from conftest import REPO, spin_until
 
 sys.path.insert(0, str(REPO / "tests" / "helpers"))
 from known_messages import TOPICS, index_of, known  # noqa: E402

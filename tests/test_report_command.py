@@ -6,7 +6,6 @@ from __future__ import annotations
 import subprocess
 
 import pytest
-
 from conftest import REPO
 
 from woody_tools.graph import entry_point

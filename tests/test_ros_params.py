@@ -37,7 +37,8 @@ def error_lines(result: subprocess.CompletedProcess) -> list[str]:
 
 @pytest.mark.parametrize("command,expected", [
     *[((node, "--ros-args", "-p", "line_sped_fpm:=130"), "unknown parameter line_sped_fpm") for node in NODES],
-    (("grader", "--ros-args", "-p", "lanes:=["), "bad --ros-args: Couldn't parse parameter override rule: '-p lanes:=['"),
+    (("grader", "--ros-args", "-p", "lanes:=["),
+     "bad --ros-args: Couldn't parse parameter override rule: '-p lanes:=['"),
     (("segmenter", "--ros-args", "-p", "lanes"), "bad --ros-args: Couldn't parse parameter override rule: '-p lanes'"),
     (("line_sim", "--ros-args", "-p", "k_values:=[]"), "parameter k_values: needs a value like [0.0, 100.0]"),
     (("reject_gate", "--ros-args", "-p", "gate_distance_m:=[]"), "parameter gate_distance_m: needs a value like [0.6]"),

@@ -1,4 +1,6 @@
-"""The committed sample bag: readable by independent readers, and replaying it into the vision nodes reproduces its verdicts."""
+"""The committed sample bag: readable by independent readers.
+
+Replaying it into the vision nodes reproduces its verdicts."""
 
 from __future__ import annotations
 
@@ -7,9 +9,9 @@ import subprocess
 import sys
 
 import pytest
+from conftest import REPO, spin_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from conftest import REPO, spin_until
 from woody_tools.graph import NodeProcess, entry_point
 
 SAMPLE = REPO / "bags" / "sample" / "line.mcap"

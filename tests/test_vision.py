@@ -17,15 +17,20 @@ import pytest
 from woody_vision.camera_model import LaneLayout, lane_center_u
 from woody_vision.frame_checks import RESIZE_CONFIRM_FRAMES, FrameChecker, FrameError, image_to_array
 from woody_vision.grading import GradingRules
-from woody_vision.segmentation import (DEFAULT_HEIGHT_THRESHOLD_M, REAL_CAMERA_FILTERS, Blob, BackgroundModel,
-                                       SegmentationParams, height_map, segment_depth)
+from woody_vision.segmentation import (
+    DEFAULT_HEIGHT_THRESHOLD_M,
+    REAL_CAMERA_FILTERS,
+    BackgroundModel,
+    Blob,
+    SegmentationParams,
+    height_map,
+    segment_depth,
+)
 from woody_vision.synthetic import (
     DEFAULT_CAMERA_HEIGHT_M,
     DEFAULT_TOP_K,
     TopFillet,
     TopScene,
-    teardrop_half_widths,
-    teardrop_polygon,
 )
 from woody_vision.tracking import CentroidTracker, TrackUpdate
 
@@ -36,9 +41,9 @@ LAYOUT3 = LaneLayout(DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 3, 0.16)
 # ----------------------------------------------------------------- helpers
 
 
-def segment(fillets, t: float = 0.0, params: SegmentationParams = SegmentationParams()) -> list[Blob]:
+def segment(fillets, t: float = 0.0, params: SegmentationParams | None = None) -> list[Blob]:
     scene = TopScene(fillets)
-    return segment_depth(scene.render(t)[1], scene.background_depth(), params)
+    return segment_depth(scene.render(t)[1], scene.background_depth(), params or SegmentationParams())
 
 
 def mask_components(fillets, t: float = 0.0) -> int:
@@ -408,7 +413,8 @@ def image_msg(array: np.ndarray, encoding: str, stamp: float = 0.0, pad: int = 0
     return SimpleNamespace(
         encoding=encoding, height=rows.shape[0] if height is None else height,
         width=rows.shape[1] if width is None else width, step=raw.shape[1], data=raw.tobytes(),
-        is_bigendian=int(bigendian), header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=int(round((stamp - sec) * 1e9)))))
+        is_bigendian=int(bigendian),
+        header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=int(round((stamp - sec) * 1e9)))))
 
 
 def test_image_to_array_round_trips_and_handles_row_padding_and_endianness():

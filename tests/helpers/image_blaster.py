@@ -19,7 +19,8 @@ def main() -> None:
     args = parser.parse_args()
     rclpy.init()
     node = Node("image_blaster")
-    publisher = node.create_publisher(Image, "/blast/image_raw", QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+    qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = node.create_publisher(Image, "/blast/image_raw", qos)
     deadline = time.monotonic() + 30.0
     while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
         time.sleep(0.01)

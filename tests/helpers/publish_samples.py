@@ -9,6 +9,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from msg_samples import samples  # noqa: E402
+
 from woody_msgs.srv import SpawnFillet  # noqa: E402
 
 
@@ -27,7 +28,8 @@ class SamplePublisher(Node):
 
     def on_spawn(self, request: SpawnFillet.Request, response: SpawnFillet.Response) -> SpawnFillet.Response:
         response.success = True
-        response.message = f"{request.mesh} k={request.stiffness} lane={request.lane} v={request.line_speed} m={request.mass}"
+        response.message = (f"{request.mesh} k={request.stiffness} lane={request.lane} "
+                            f"v={request.line_speed} m={request.mass}")
         response.fillet_id = 99
         return response
 

@@ -77,13 +77,14 @@ def main():
         ("/top_camera/color/image_raw", args.top_rate, 672, 376, "rgb8", frames(672, 376, args.noise)),
         ("/top_camera/depth/image_raw", args.top_rate, 672, 376, "32FC1", frames(672, 376, 0, depth=True)),
     ]
-    pubs = [(node.create_publisher(Image, topic, qos), rate, w, h, enc, data) for topic, rate, w, h, enc, data in streams]
+    pubs = [(node.create_publisher(Image, topic, qos), rate, w, h, enc, data)
+            for topic, rate, w, h, enc, data in streams]
     deadline = time.monotonic() + 20
     while any(p.get_subscription_count() == 0 for p, *_ in pubs) and time.monotonic() < deadline:
         time.sleep(0.05)
     time.sleep(0.5)
     msgs = []
-    for pub, rate, w, h, enc, data in pubs:
+    for _pub, _rate, w, h, enc, data in pubs:
         bpp = 4 if enc == "32FC1" else 3
         msgs.append([Image(height=h, width=w, encoding=enc, step=w * bpp, data=d) for d in data])
     sent = [0] * len(pubs)
@@ -106,7 +107,7 @@ def main():
     total_bytes = 0
     print(f"recorder exit {code}; {elapsed:.1f} s; recorder CPU {cpu / elapsed:.2f} cores; "
           f"bag {bag.stat().st_size / 1e6:.0f} MB")
-    for (topic, rate, w, h, enc, data), n in zip(streams, sent):
+    for (topic, _rate, _w, _h, _enc, data), n in zip(streams, sent):
         got = summary["topics"].get(topic, {}).get("count", 0)
         size = len(data[0])
         total_bytes += got * size

@@ -14,25 +14,25 @@ import time
 
 import numpy as np
 import rclpy
+from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
-from woody_msgs.msg import FilletSpawn, FilletTrackArray
-from woody_msgs.srv import SpawnFillet
 
 from woody_common.calibration import load_calibration
+from woody_msgs.msg import FilletSpawn, FilletTrackArray
+from woody_msgs.srv import SpawnFillet
 from woody_sim.line_geometry import SPEED_RANGE_FPM, LineGeometry, fpm_to_mps, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
-from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.pacing import LeadLimiter
+from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.ros_params import declare, run_node
-from woody_sim.side_gate import SideFrameGate
 from woody_sim.sensor_model import sensor_preset, to_message_array
+from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
 
 WORLD_FRAME = "world"
@@ -54,7 +54,8 @@ class LineSim(Node):
                             "commercial line speeds).", *SPEED_RANGE_FPM)
         self.k_values = [float(k) for k in declare(self, "k_values", [0.0, 100.0],
                                                    "Stiffness values (N*m/rad) drawn per spawned fillet.")]
-        mesh_spec = declare(self, "meshes", "builtin", "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
+        mesh_spec = declare(self, "meshes", "builtin",
+                            "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
         seed = declare(self, "seed", 7, "Seed of the stiffness draw and generated meshes.", 0, 2**31 - 1)
         self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, 100000)
         self.spawn_duration = declare(self, "spawn_duration_s", 0.0, "Stop spawning after this much sim time "
@@ -112,7 +113,8 @@ class LineSim(Node):
         self.side_gate = SideFrameGate(idle_period_s=1.0 / side_idle)
         self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
 
-        latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
         camera_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         self.truth_pub = self.create_publisher(FilletSpawn, "line/ground_truth", latched)

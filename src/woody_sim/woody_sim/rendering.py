@@ -48,9 +48,10 @@ import threading
 import time
 import traceback
 import weakref
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, NamedTuple, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -650,7 +651,7 @@ class RenderProcess:
             self._closed = True
             self._finalizer()
 
-    def __enter__(self) -> "RenderProcess":
+    def __enter__(self) -> RenderProcess:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -78,7 +78,8 @@ def conditions(n_meshes: int, seed: int = 0) -> Iterator[SoakCondition]:
             yield SoakCondition(*grid[i])
 
 
-def run_batch(condition: SoakCondition, mesh: FilletMesh, config: PhysicsConfig | None = None) -> tuple[int, int, float, float]:
+def run_batch(condition: SoakCondition, mesh: FilletMesh,
+              config: PhysicsConfig | None = None) -> tuple[int, int, float, float]:
     """Simulate one batch to the end; returns (passages, blow-ups, worst segment speed m/s, sim seconds)."""
     geometry = LineGeometry(lanes=condition.lanes, spawn_x=-0.15)
     geometry = replace(geometry, remove_z=-2.0 * geometry.roller_radius - FREE_FALL_MARGIN)

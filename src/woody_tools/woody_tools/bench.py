@@ -153,9 +153,8 @@ def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_
 
 
 def bench_vision(frames: int, seconds: float) -> dict:
-    from woody_vision.bench import benchmark_vision
-
     from woody_tools.vision_latency import measure_verdict_latency
+    from woody_vision.bench import benchmark_vision
 
     figures = dict(benchmark_vision(frames=frames))
     latency = measure_verdict_latency(seconds)  # closing frame published -> verdict received, across processes

@@ -14,8 +14,8 @@ other mesh (``seed0000``.. and scans from a folder) is a reference (real) mesh.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

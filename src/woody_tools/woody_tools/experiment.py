@@ -52,7 +52,9 @@ SPAWN_X = -0.42
 
 TOP_RATE_HZ = 30.0
 TOP_START_X = -0.12
-"""Top frames start once a fillet's leading end is this close to the roller edge (m; >= 7 frames before it at 130 FPM)."""
+"""Top frames start once a fillet's leading end is this close to the roller edge.
+
+In metres; >= 7 frames before the edge at 130 FPM."""
 SIDE_RATE_HZ = 200.0
 SIDE_FAR_RATE_HZ = 20.0
 SIDE_DONE_DISTANCE = 0.12

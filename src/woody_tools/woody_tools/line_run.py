@@ -131,6 +131,7 @@ class LineMonitor:
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
+
         from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
 
         self.domain_id = domain_id

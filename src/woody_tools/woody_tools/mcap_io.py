@@ -23,15 +23,14 @@ import io
 import json
 import os
 import re
-import struct
 import sys
 import threading
 import time
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any, Iterable, Iterator, NamedTuple
+from typing import Any, NamedTuple
 
 import mcap.writer as _mcap_writer
-from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -99,7 +98,7 @@ def _prefixes() -> list[Path]:
     return prefixes
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _msg_text(pkg: str, name: str) -> str:
     for prefix in _prefixes():
         candidate = prefix / "share" / pkg / "msg" / f"{name}.msg"
@@ -127,7 +126,7 @@ def _dependencies(pkg: str, text: str) -> list[str]:
     return sorted(deps)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def message_definition(type_name: str) -> str:
     """rosbag2's ``ros2msg`` schema text of ``type_name`` (``pkg/msg/Type`` or ``pkg/Type``)."""
     pkg, _, name = normalize_type(type_name).split("/")
@@ -149,7 +148,7 @@ def message_definition(type_name: str) -> str:
     return "\n".join(blocks)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def message_class(type_name: str) -> type:
     """The Python class of ``pkg/msg/Type``; `LookupError` (one line) when it cannot be imported."""
     try:
@@ -410,7 +409,7 @@ class BagWriter:
         finally:
             self._file.close()
 
-    def __enter__(self) -> "BagWriter":
+    def __enter__(self) -> BagWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:

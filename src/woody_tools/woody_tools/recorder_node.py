@@ -59,10 +59,10 @@ import threading
 import time
 
 import rclpy
-from rclpy.clock import Clock, ClockType
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import InvalidParameterTypeException, ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -147,7 +147,7 @@ class Recorder(Node):
         def desc(text: str, kind: int, **kw) -> ParameterDescriptor:
             return ParameterDescriptor(description=text, type=kind, read_only=True, **kw)
 
-        S, D, I, SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_DOUBLE,
+        S, D, INT, SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_DOUBLE,
                        ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_STRING_ARRAY)
         self.declare_parameter("output", "", desc("path of the .mcap (default bags/<timestamp>.mcap)", S))
         self.declare_parameter("topics", Parameter.Type.STRING_ARRAY,
@@ -155,13 +155,13 @@ class Recorder(Node):
         self.declare_parameter("topic_regex", "", desc("also record topics matching this regex", S))
         self.declare_parameter("exclude_regex", DEFAULT_EXCLUDE, desc("never record topics matching this", S))
         self.declare_parameter("discovery_period", 0.5, desc("seconds between searches for new topics", D))
-        self.declare_parameter("queue_depth", 100, desc("keep-last depth of each subscription", I))
+        self.declare_parameter("queue_depth", 100, desc("keep-last depth of each subscription", INT))
         self.declare_parameter("compression", "zstd", desc("chunk compression: zstd, lz4 or none", S))
-        self.declare_parameter("compression_level", 1, desc("zstd level (1 keeps up with 200 Hz images)", I))
-        self.declare_parameter("chunk_size", 4 * 1024 * 1024, desc("bytes per MCAP chunk", I))
+        self.declare_parameter("compression_level", 1, desc("zstd level (1 keeps up with 200 Hz images)", INT))
+        self.declare_parameter("chunk_size", 4 * 1024 * 1024, desc("bytes per MCAP chunk", INT))
         self.declare_parameter("flush_period", 1.0, desc("max seconds a message waits before its chunk is "
                                                          "written (what a SIGKILL can lose)", D))
-        self.declare_parameter("max_buffer_mb", 512, desc("received but unwritten data held in memory", I))
+        self.declare_parameter("max_buffer_mb", 512, desc("received but unwritten data held in memory", INT))
         self.declare_parameter("run_settings", "", desc("JSON object of the recorded run's settings, kept in the "
                                                         "bag's woody metadata record (woody report rebuilds its "
                                                         "settings table from it)", S))
@@ -247,7 +247,8 @@ class Recorder(Node):
         sub_qos = self._subscriptions_by_topic[topic].qos_profile
         for pub in self.get_publishers_info_by_topic(topic):
             offered = pub.qos_profile
-            if ((sub_qos.reliability == ReliabilityPolicy.RELIABLE and offered.reliability != ReliabilityPolicy.RELIABLE)
+            if ((sub_qos.reliability == ReliabilityPolicy.RELIABLE
+                 and offered.reliability != ReliabilityPolicy.RELIABLE)
                     or (sub_qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
                         and offered.durability != DurabilityPolicy.TRANSIENT_LOCAL)):
                 self.get_logger().warning(

@@ -44,8 +44,7 @@ import threading
 import time
 from typing import Any
 
-from woody_tools.mcap_io import (BagError, bag_summary, message_class, message_definition, parse_qos_profiles,
-                                 read_bag)
+from woody_tools.mcap_io import BagError, bag_summary, message_class, message_definition, parse_qos_profiles, read_bag
 
 CLOCK = "/clock"
 

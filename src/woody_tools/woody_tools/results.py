@@ -12,8 +12,8 @@ from __future__ import annotations
 import csv
 import math
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -250,7 +250,8 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
         L.append(f"| {cond} | {a} | {b} | {c} |")
     L.append("")
     # ---- side checks
-    s100 = [(k, side_means[(100.0, k)]) for k in ks if (100.0, k) in side_means and math.isfinite(side_means[(100.0, k)])]
+    s100 = [(k, side_means[(100.0, k)]) for k in ks
+            if (100.0, k) in side_means and math.isfinite(side_means[(100.0, k)])]
     if len(s100) >= 2:
         vals = [v for _, v in s100]
         ok = all(b > a for a, b in zip(vals, vals[1:]))
@@ -283,7 +284,8 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
             so = mean_sd(_select([r for r in rows if r["status"] == "scored"], speed, k, column="solidity_term"))
             top_means[(speed, k)] = phi[0]
             paper = PAPER_TOP.get(speed, {}).get(k)
-            pp = ("—",) * 3 if paper is None else (f"{paper[0]:.2f} ± {paper[1]:.2f}", f"{paper[2]:.3f}", f"{paper[3]:.3f}")
+            pp = ("—",) * 3 if paper is None else (f"{paper[0]:.2f} ± {paper[1]:.2f}", f"{paper[2]:.3f}",
+                                                    f"{paper[3]:.3f}")
             L.append(f"| {speed:g} | {k:g} | {phi[2]} | {_fmt(*phi, 2)} | {pp[0]} | {hu[0]:.3f} | {pp[1]} | "
                      f"{so[0]:.4f} | {pp[2]} |")
     L.append("")
@@ -293,7 +295,8 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
         seq = [(k, v) for k, v in seq if math.isfinite(v)]
         if len(seq) >= 2:
             vals = [v for _, v in seq]
-            checks.append((f"top {speed:g} FPM: Φ falls monotonically with k", all(b < a for a, b in zip(vals, vals[1:])),
+            checks.append((f"top {speed:g} FPM: Φ falls monotonically with k",
+                           all(b < a for a, b in zip(vals, vals[1:])),
                            ", ".join(f"k={k:g}: {v:.2f}" for k, v in seq)))
     p0, p100 = top_means.get((100.0, 0.0), math.nan), top_means.get((100.0, 100.0), math.nan)
     if math.isfinite(p0) and math.isfinite(p100):
@@ -316,8 +319,8 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
             nrm = mean_sd(_select(rows, speed, NORMAL_K, lane))
             sev = mean_sd(_select(rows, speed, SEVERE_K, lane))
             paper = PAPER_LANES.get(lane) if math.isclose(speed, 100.0) else None
-            pp = ("—",) * 3 if paper is None else (f"{paper[0]:.2f} ± {paper[1]:.2f}", f"{paper[2]:.2f} ± {paper[3]:.2f}",
-                                                    f"{paper[4]:.2f}")
+            pp = ("—",) * 3 if paper is None else (f"{paper[0]:.2f} ± {paper[1]:.2f}",
+                                                    f"{paper[2]:.2f} ± {paper[3]:.2f}", f"{paper[4]:.2f}")
             L.append(f"| {speed:g} | {lane} | {_fmt(*nrm, 2)} | {pp[0]} | {_fmt(*sev, 2)} | {pp[1]} | "
                      f"{nrm[0] - sev[0]:.2f} | {pp[2]} |")
             if nrm[2] and sev[2]:
@@ -390,8 +393,8 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
 
 def _heldout_note(meshes: list[str]) -> str:
     try:
-        from woody_tools.calibrate import CALIBRATION_MESHES
         from woody_sim.meshes import load_mesh_set
+        from woody_tools.calibrate import CALIBRATION_MESHES
 
         cal = {m.name for m in load_mesh_set(CALIBRATION_MESHES)[0]}
     except Exception:  # noqa: BLE001 - the note is informative only

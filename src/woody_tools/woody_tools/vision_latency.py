@@ -27,8 +27,8 @@ def measure_verdict_latency(seconds: float = 10.0, lanes: int = 3, seed: int = 3
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import CameraInfo, Image
-    from woody_msgs.msg import FilletVerdict
 
+    from woody_msgs.msg import FilletVerdict
     from woody_vision.synthetic import TopScene, lane_streams
 
     loop_s = min(seconds, SCENE_LOOP_S)  # the scene repeats so drawing it stays cheap however long the run
@@ -39,7 +39,8 @@ def measure_verdict_latency(seconds: float = 10.0, lanes: int = 3, seed: int = 3
     with lease_domain() as lease, tempfile.TemporaryDirectory() as logs:
         params = {"use_sim_time": True, "lanes": lanes}
         nodes = [NodeProcess("segmenter", params, domain_id=lease.domain_id, log_dir=Path(logs)),
-                 NodeProcess("grader", dict(params, use_side_view=False), domain_id=lease.domain_id, log_dir=Path(logs))]
+                 NodeProcess("grader", dict(params, use_side_view=False), domain_id=lease.domain_id,
+                             log_dir=Path(logs))]
         context = rclpy.Context()
         rclpy.init(context=context, domain_id=lease.domain_id)
         node = rclpy.create_node("bench_latency", context=context)

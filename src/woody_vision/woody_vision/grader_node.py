@@ -15,22 +15,22 @@ import sys
 import cv2
 import numpy as np
 from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from geometry_msgs.msg import Point
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import ImageMarker
-from woody_msgs.msg import FilletTrackArray, FilletVerdict
 
-from woody_sim.ros_params import declare, run_node
 from woody_common.calibration import load_calibration
+from woody_msgs.msg import FilletTrackArray, FilletVerdict
+from woody_sim.ros_params import declare, run_node
 from woody_vision.camera_model import edge_row
 from woody_vision.frame_checks import FrameChecker, FrameError
-from woody_vision.image_encodings import color_rgb
-from woody_vision.image_qos import declare_image_qos
 from woody_vision.grader_core import FilletGrader, GradedFillet, TrackObservation
 from woody_vision.grading import GradingRules
+from woody_vision.image_encodings import color_rgb
+from woody_vision.image_qos import declare_image_qos
 from woody_vision.side_view import SidePassageTracker
 
 MARKER_COLOURS = {"pending": ColorRGBA(r=1.0, g=0.85, b=0.0, a=1.0), "normal": ColorRGBA(g=0.8, a=1.0),
@@ -38,7 +38,8 @@ MARKER_COLOURS = {"pending": ColorRGBA(r=1.0, g=0.85, b=0.0, a=1.0), "normal": C
 """Contour colours on the image: yellow until graded, then green normal, red woody, grey unscored."""
 MARKER_LIFETIME_NS = 200_000_000
 """A marker outlives its frame by a few frames, so a viewer never flickers, and vanishes with the fillet."""
-LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY, "unscored": FilletVerdict.CLASS_UNSCORED}
+LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY,
+          "unscored": FilletVerdict.CLASS_UNSCORED}
 
 
 class Grader(Node):
@@ -46,8 +47,9 @@ class Grader(Node):
 
     def __init__(self) -> None:
         super().__init__("grader")
-        threshold = declare(self, "threshold", load_calibration().phi_threshold, "Φ below this is woody (stiff fillets deform "
-                            "less); the default is the calibrated one.", 0.001, 1000.0)
+        threshold = declare(self, "threshold", load_calibration().phi_threshold,
+                            "Φ below this is woody (stiff fillets deform less); the default is the calibrated one.",
+                            0.001, 1000.0)
         moderate = declare(self, "moderate_threshold", 0.0, "Φ below this grades at least moderate (0 = threshold).",
                            0.0, 1000.0)
         severe = declare(self, "severe_threshold", 0.0, "Φ below this grades severe (0 = no grades).", 0.0, 1000.0)

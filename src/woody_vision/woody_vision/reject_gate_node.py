@@ -14,12 +14,11 @@ import sys
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from woody_msgs.msg import FilletVerdict, GateCommand
 
+from woody_msgs.msg import FilletVerdict, GateCommand
 from woody_sim.line_geometry import FPM_TO_MPS, SPEED_RANGE_FPM
 from woody_sim.ros_params import declare, run_node
 from woody_vision.gate_timing import GateTiming
-
 
 
 class RejectGate(Node):

@@ -17,8 +17,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Empty
-from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 
+from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 from woody_sim.ros_params import declare, run_node
 from woody_vision.camera_model import LaneLayout
 from woody_vision.frame_checks import FrameChecker, FrameError
@@ -153,7 +153,8 @@ class Segmenter(Node):
         for track in tracks:
             colour = (0, 255, 0) if track.unseen == 0 else (255, 160, 0)
             cv2.polylines(canvas, [track.blob.contour.reshape(-1, 1, 2)], True, colour, 1)
-            label = f"{track.track_id} L{track.lane}" + (f" {self.scores[track.track_id]}" if track.track_id in self.scores else "")
+            score = self.scores.get(track.track_id)
+            label = f"{track.track_id} L{track.lane}" + (f" {score}" if score is not None else "")
             u, v = (int(c) for c in track.blob.centroid)
             cv2.putText(canvas, label, (u - 20, v), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1)
         out = Image(header=depth_msg.header, height=canvas.shape[0], width=canvas.shape[1], encoding="rgb8",

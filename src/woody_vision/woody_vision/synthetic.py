@@ -18,8 +18,8 @@ the belt top line, and pink strips that either drape around the roller
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import cv2
 import numpy as np
