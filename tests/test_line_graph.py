@@ -7,11 +7,8 @@ import pytest
 from conftest import spin_until
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from woody_common.stamps import stamp_to_seconds
 from woody_tools.graph import NodeProcess
-
-
-def _seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
 
 
 def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_path):
@@ -30,7 +27,7 @@ def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_pa
     reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     for name, msg_type in topics.items():
         ros_node.create_subscription(msg_type, name, lambda m, n=name: received[n].append(m), reliable)
-    ros_node.create_subscription(Clock, "/clock", lambda m: received["/clock"].append(_seconds(m.clock)), 100)
+    ros_node.create_subscription(Clock, "/clock", lambda m: received["/clock"].append(stamp_to_seconds(m.clock)), 100)
     ros_node.create_subscription(FilletSpawn, "/line/ground_truth", received["/line/ground_truth"].append,
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
@@ -44,7 +41,7 @@ def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_pa
         assert sim.stop() == 0, sim.log_tail()
 
     def stamps(name):
-        return np.array([_seconds(m.header.stamp) for m in received[name]])
+        return np.array([stamp_to_seconds(m.header.stamp) for m in received[name]])
 
     top, side = stamps("/top_camera/depth/image_raw"), stamps("/side_camera/image_raw")
     assert abs(len(top) - 30 * duration) <= 3, len(top)

@@ -1,6 +1,6 @@
 """Every node's command line through the real entry points: a bad argument is one line and exit code 2.
 
-Covers `woody_sim.ros_params` (declare, check_overrides, init_checked, run_node) as every
+Covers `woody_common.ros_params` (declare, check_overrides, init_checked, run_node) as every
 node uses it: unknown names are refused with the known ones, malformed overrides and
 stray arguments never reach a traceback, untyped lists are refused, ``--help`` lists the
 parameters, and every declared parameter is read-only (they are read at start-up).
@@ -17,7 +17,7 @@ import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
 
-from woody_sim.ros_params import declare
+from woody_common.ros_params import declare
 from woody_tools.graph import entry_point
 
 NODES = ["line_sim", "segmenter", "grader", "reject_gate", "recorder"]
@@ -75,7 +75,7 @@ def test_declared_parameters_are_read_only():
     import rclpy
     from rclpy.node import Node
 
-    from woody_sim.ros_params import declare
+    from woody_common.ros_params import declare
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=0)

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
+from woody_common.line import TOP_CAMERA_HEIGHT_M
 from woody_vision.camera_model import LaneLayout
 from woody_vision.segmentation import Blob, segment_depth
 from woody_vision.shape_score import (
@@ -31,12 +32,12 @@ from woody_vision.shape_score import (
     shape_terms,
     solidity,
 )
-from woody_vision.synthetic import DEFAULT_CAMERA_HEIGHT_M, DEFAULT_TOP_K, TopFillet, TopScene, teardrop_polygon
+from woody_vision.synthetic import DEFAULT_TOP_K, TopFillet, TopScene, teardrop_polygon
 from woody_vision.tracking import CentroidTracker
 
 EDGE = 200.0
 FPS = 30.0
-LAYOUT3 = LaneLayout(DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 3, 0.16)
+LAYOUT3 = LaneLayout(DEFAULT_TOP_K, TOP_CAMERA_HEIGHT_M, 3, 0.16)
 
 
 def polygon_contour(points) -> np.ndarray:

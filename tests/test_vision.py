@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
+from woody_common.line import TOP_CAMERA_HEIGHT_M
 from woody_vision.camera_model import LaneLayout, lane_center_u
 from woody_vision.frame_checks import RESIZE_CONFIRM_FRAMES, FrameChecker, FrameError, image_to_array
 from woody_vision.grading import GradingRules
@@ -27,7 +28,6 @@ from woody_vision.segmentation import (
     segment_depth,
 )
 from woody_vision.synthetic import (
-    DEFAULT_CAMERA_HEIGHT_M,
     DEFAULT_TOP_K,
     TopFillet,
     TopScene,
@@ -35,7 +35,7 @@ from woody_vision.synthetic import (
 from woody_vision.tracking import CentroidTracker, TrackUpdate
 
 FPS = 30.0
-LAYOUT3 = LaneLayout(DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 3, 0.16)
+LAYOUT3 = LaneLayout(DEFAULT_TOP_K, TOP_CAMERA_HEIGHT_M, 3, 0.16)
 
 
 # ----------------------------------------------------------------- helpers
@@ -115,7 +115,7 @@ def test_tip_to_tail_touching_fillets_split_at_their_contact(overlap_m, lead_m):
 def test_side_by_side_fillets_across_lanes_split_into_two_blobs_and_tracks(overlap_m, stagger_m):
     """Neighbours in two lanes touching along their length (one distance core, two end notches)."""
     pitch = W - overlap_m
-    layout = LaneLayout(DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 2, pitch)
+    layout = LaneLayout(DEFAULT_TOP_K, TOP_CAMERA_HEIGHT_M, 2, pitch)
     fillets = [TopFillet(lead_m=-0.25, across_m=pitch / 2), TopFillet(lead_m=-0.25 - stagger_m, across_m=-pitch / 2)]
     assert mask_components(fillets) == 1, "precondition: the two fillets form one connected component"
     singles = [segment([f])[0] for f in fillets]
@@ -177,7 +177,7 @@ def test_blob_geometry_matches_the_drawn_fillet():
     scene = TopScene([TopFillet(lead_m=-0.2, across_m=0.05)])
     (blob,) = segment_depth(scene.render(0.0)[1], scene.background_depth())
     intr = scene.intrinsics
-    expected_u = intr.cx + intr.fx * 0.05 / (DEFAULT_CAMERA_HEIGHT_M - 0.02)
+    expected_u = intr.cx + intr.fx * 0.05 / (TOP_CAMERA_HEIGHT_M - 0.02)
     assert blob.centroid[0] == pytest.approx(expected_u, abs=1.0)
     u, v, w, h = blob.bbox
     assert (blob.contour[:, 0].min(), blob.contour[:, 1].min()) == (u, v)
@@ -389,7 +389,7 @@ def test_lane_from_the_mean_column():
     assert LAYOUT3.lane_of_u(10_000) == 0 and LAYOUT3.lane_of_u(-10_000) == 2  # clamped
     no_layout = CentroidTracker().update([square_blob(100, 100)]).active[0]
     assert no_layout.lane == -1
-    assert lane_center_u(1, DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 3, 0.16) == pytest.approx(DEFAULT_TOP_K[2])
+    assert lane_center_u(1, DEFAULT_TOP_K, TOP_CAMERA_HEIGHT_M, 3, 0.16) == pytest.approx(DEFAULT_TOP_K[2])
 
 
 def test_tracker_validates_its_options():

@@ -24,7 +24,8 @@ import time
 
 import numpy as np
 
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps
+from woody_common.line import fpm_to_mps
+from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
 from woody_sim.meshes import load_mesh_set
 

@@ -22,15 +22,18 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
+from woody_common import topics
 from woody_common.calibration import load_calibration
+from woody_common.line import SPEED_RANGE_FPM, fpm_to_mps
+from woody_common.ros_params import declare, run_node
+from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
-from woody_sim.line_geometry import SPEED_RANGE_FPM, LineGeometry, fpm_to_mps, top_camera_preset
+from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
 from woody_sim.pacing import LeadLimiter
 from woody_sim.rendering import RenderProcess, camera_info_fields
-from woody_sim.ros_params import declare, run_node
 from woody_sim.sensor_model import sensor_preset, to_message_array
 from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
@@ -117,12 +120,12 @@ class LineSim(Node):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         camera_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
-        self.truth_pub = self.create_publisher(FilletSpawn, "line/ground_truth", latched)
-        self.color_pub = self.create_publisher(Image, "top_camera/color/image_raw", camera_qos)
-        self.depth_pub = self.create_publisher(Image, "top_camera/depth/image_raw", camera_qos)
+        self.truth_pub = self.create_publisher(FilletSpawn, topics.GROUND_TRUTH, latched)
+        self.color_pub = self.create_publisher(Image, topics.TOP_COLOR_IMAGE, camera_qos)
+        self.depth_pub = self.create_publisher(Image, topics.TOP_DEPTH_IMAGE, camera_qos)
         self.color_info_pub = self.create_publisher(CameraInfo, "top_camera/color/camera_info", camera_qos)
-        self.depth_info_pub = self.create_publisher(CameraInfo, "top_camera/depth/camera_info", camera_qos)
-        self.side_pub = self.create_publisher(Image, "side_camera/image_raw", camera_qos)
+        self.depth_info_pub = self.create_publisher(CameraInfo, topics.TOP_DEPTH_INFO, camera_qos)
+        self.side_pub = self.create_publisher(Image, topics.SIDE_IMAGE, camera_qos)
         self.side_info_pub = self.create_publisher(CameraInfo, "side_camera/camera_info", camera_qos)
         self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
         self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
@@ -133,8 +136,8 @@ class LineSim(Node):
             publisher.publish(_camera_pose(camera))
         self.pacer = LeadLimiter(max_lead) if max_lead > 0 else None
         if self.pacer is not None:
-            self.create_subscription(FilletTrackArray, "vision/tracks",
-                                     lambda m: self.pacer.ack(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9),
+            self.create_subscription(FilletTrackArray, topics.TRACKS,
+                                     lambda m: self.pacer.ack(stamp_to_seconds(m.header.stamp)),
                                      QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
         self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
             f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
@@ -183,10 +186,7 @@ class LineSim(Node):
 
     def _header(self, frame_id: str, stamp: float | None = None) -> Header:
         t = self.world.time if stamp is None else stamp
-        header = Header(frame_id=frame_id)
-        header.stamp.sec = int(t)
-        header.stamp.nanosec = int(round((t - int(t)) * 1e9)) % 1_000_000_000
-        return header
+        return Header(frame_id=frame_id, stamp=seconds_to_stamp(t))
 
     def _publish_clock(self) -> None:
         msg = Clock()

@@ -43,8 +43,9 @@ import numpy as np
 import pybullet as p
 
 from woody_common.calibration import Calibration, load_calibration
+from woody_common.line import fpm_to_mps
 from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps
+from woody_sim.line_geometry import LineGeometry
 from woody_sim.meshes import FilletMesh, generate_fillet
 
 MAX_SPEED_MPS = 5.0

@@ -25,7 +25,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps
+from woody_common.line import fpm_to_mps
+from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import FilletMesh
 

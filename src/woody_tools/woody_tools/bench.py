@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from woody_common.stamps import stamp_to_seconds
 from woody_tools.graph import NodeProcess, entry_point, lease_domain
 
 
@@ -132,7 +133,7 @@ def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_
         node = rclpy.create_node("bench_clock", context=context)
         samples: list[tuple[float, float]] = []
         node.create_subscription(Clock, "/clock", lambda m: samples.append(
-            (time.monotonic(), m.clock.sec + m.clock.nanosec * 1e-9)), 100)
+            (time.monotonic(), stamp_to_seconds(m.clock))), 100)
         sim = NodeProcess("line_sim", {"lanes": lanes, "line_speed_fpm": speed_fpm, "top_rate_hz": 30.0,
                                        "side_rate_hz": side_rate_hz, "duration_s": warmup + seconds},
                           domain_id=lease.domain_id, log_dir=Path(logs))

@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from woody_common.calibration import load_calibration
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps, top_camera_preset
+from woody_common.line import fpm_to_mps
+from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
 from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer

@@ -44,6 +44,7 @@ import threading
 import time
 from typing import Any
 
+from woody_common.stamps import nanoseconds_to_stamp
 from woody_tools.mcap_io import BagError, bag_summary, message_class, message_definition, parse_qos_profiles, read_bag
 
 CLOCK = "/clock"
@@ -274,7 +275,7 @@ class _Player:
         if bag_ns <= self._last_clock:
             return
         self._last_clock = bag_ns
-        self._clock_msg.clock.sec, self._clock_msg.clock.nanosec = divmod(bag_ns, 1_000_000_000)
+        self._clock_msg.clock = nanoseconds_to_stamp(bag_ns)
         self.clock_publisher.publish(self._clock_msg)
 
     def _wait_until(self, target: float, t0_wall: float, t0_bag: int, next_bag: int) -> None:

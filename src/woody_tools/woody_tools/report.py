@@ -13,7 +13,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from woody_sim.line_geometry import FPM_TO_MPS
+from woody_common.line import FPM_TO_MPS
 
 VERDICT_COLUMNS = [
     "fillet_id", "lane", "mesh", "k", "speed_fpm", "phi", "hu_term", "solidity_term",

@@ -7,7 +7,8 @@ import json
 import sys
 from pathlib import Path
 
-from woody_tools.report import Spawn, build_report, join, read_csv, write_csv
+from woody_common import topics
+from woody_tools.report import build_report, join, read_csv, write_csv
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -20,19 +21,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def rows_from_bag(path: Path, woody_k: float = 50.0) -> tuple[list[dict], str | None]:
     """Ground truth and verdicts recorded in a bag (of a line in any namespace), joined into verdict-table rows,
     and where a truncated bag ends (None for a complete one): the readable part of a cut recording still counts."""
-    from woody_tools.line_run import verdict_from_msg
+    from woody_tools.line_run import spawn_from_msg, verdict_from_msg
     from woody_tools.mcap_io import BagError, bag_topics, decode, read_bag
 
     spawns, verdicts, ended = [], [], None
     try:
-        topics = [t for t in bag_topics(path) if t.endswith(("/line/ground_truth", "/grading/verdicts"))]
-        for topic, type_name, data, _log_time in read_bag(path, topics=topics):
+        wanted = [t for t in bag_topics(path) if t.endswith(("/" + topics.GROUND_TRUTH, "/" + topics.VERDICTS))]
+        for topic, type_name, data, _log_time in read_bag(path, topics=wanted):
             msg = decode(type_name, data)
-            if topic.endswith("/line/ground_truth"):
-                spawns.append(Spawn(sim_id=msg.fillet_id, lane=msg.lane, mesh=msg.mesh, k=msg.stiffness,
-                                    mass=msg.mass, line_speed=msg.line_speed,
-                                    stamp=msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,
-                                    spawn_x=msg.position.x))
+            if topic.endswith("/" + topics.GROUND_TRUTH):
+                spawns.append(spawn_from_msg(msg))
             else:
                 verdicts.append(verdict_from_msg(msg))
     except BagError as exc:

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from woody_common import topics
+from woody_common.stamps import nanoseconds_to_stamp, stamp_to_nanoseconds
 from woody_tools.graph import NodeProcess, lease_domain, wait_for
 
 FRAME_RATE_HZ = 30.0
@@ -48,19 +50,19 @@ def measure_verdict_latency(seconds: float = 10.0, lanes: int = 3, seed: int = 3
         executor.add_node(node)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         clock_pub = node.create_publisher(Clock, "/clock", 10)
-        depth_pub = node.create_publisher(Image, "top_camera/depth/image_raw", qos)
-        info_pub = node.create_publisher(CameraInfo, "top_camera/depth/camera_info", qos)
+        depth_pub = node.create_publisher(Image, topics.TOP_DEPTH_IMAGE, qos)
+        info_pub = node.create_publisher(CameraInfo, topics.TOP_DEPTH_INFO, qos)
 
         def on_verdict(msg: FilletVerdict) -> None:
             if msg.classification == FilletVerdict.CLASS_UNSCORED:
                 return  # no window closed: its stamp is the last frame seen, max_unseen frames before the verdict
-            key = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            key = stamp_to_nanoseconds(msg.header.stamp)
             if key in published:
                 latencies.append((time.monotonic() - published[key]) * 1e3)
 
         # Verdicts are timestamped by their own executor thread, so drawing the next frame never delays them.
         listener = rclpy.create_node("bench_latency_listener", context=context)
-        listener.create_subscription(FilletVerdict, "grading/verdicts", on_verdict, QoSProfile(depth=100))
+        listener.create_subscription(FilletVerdict, topics.VERDICTS, on_verdict, QoSProfile(depth=100))
         listen = rclpy.executors.SingleThreadedExecutor(context=context)
         listen.add_node(listener)
         thread = threading.Thread(target=listen.spin, daemon=True)
@@ -79,7 +81,7 @@ def measure_verdict_latency(seconds: float = 10.0, lanes: int = 3, seed: int = 3
                 _, depth = scene.render(t % loop_s)
                 key = int(round(t * 1e9))
                 clock = Clock()
-                clock.clock.sec, clock.clock.nanosec = divmod(key, 1_000_000_000)
+                clock.clock = nanoseconds_to_stamp(key)
                 clock_pub.publish(clock)
                 info.header.stamp = clock.clock
                 info_pub.publish(info)
