@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 @pytest.fixture
 def ros_domain():
     """A ROS domain id that no other test or run on this machine is using."""
-    from woody_tools.graph import lease_domain
+    from woody_tools.processes import lease_domain
 
     env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
     with lease_domain(env) as lease:

@@ -8,7 +8,7 @@ from conftest import spin_until
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from woody_common.stamps import stamp_to_seconds
-from woody_tools.graph import NodeProcess
+from woody_tools.processes import NodeProcess
 
 
 def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_path):
@@ -140,7 +140,7 @@ def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_d
 def test_bad_parameters_are_refused_with_the_reason(tmp_path):
     import subprocess
 
-    from woody_tools.graph import entry_point
+    from woody_tools.processes import entry_point
 
     cases = {
         "line_sim": [("line_speed_fpm", "0.0", "line_speed_fpm"), ("lanes", "7", "lanes"),

@@ -18,8 +18,8 @@ from conftest import REPO
 sys.path.insert(0, str(REPO / "tests" / "helpers"))
 from known_messages import TOPICS, index_of, known, same  # noqa: E402
 
-from woody_tools.graph import NodeProcess, wait_for  # noqa: E402
 from woody_tools.mcap_io import BagError, bag_summary, decode, read_bag  # noqa: E402
+from woody_tools.processes import NodeProcess, wait_for  # noqa: E402
 
 COUNT = 20
 
@@ -149,7 +149,7 @@ def test_killed_recorder_leaves_its_written_chunks_readable(ros_domain, spawn_he
     from mcap.reader import make_reader
     from rosbags.highlevel import AnyReader
 
-    from woody_tools.graph import entry_point
+    from woody_tools.processes import entry_point
 
     fixed = tmp_path / "fixed.mcap"
     result = subprocess.run([entry_point("woody"), "bag", "recover", str(path), str(fixed)], capture_output=True,

@@ -18,7 +18,7 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.parameter import Parameter
 
 from woody_common.ros_params import declare
-from woody_tools.graph import entry_point
+from woody_tools.processes import entry_point
 
 NODES = ["line_sim", "segmenter", "grader", "reject_gate", "recorder"]
 
@@ -113,7 +113,7 @@ def test_every_node_stops_cleanly_with_one_summary_line(ros_domain, tmp_path, no
     import signal
     import time
 
-    from woody_tools.graph import wait_for
+    from woody_tools.processes import wait_for
 
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), PYTHONUNBUFFERED="1")
     log = tmp_path / "node.log"

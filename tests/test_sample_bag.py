@@ -12,7 +12,7 @@ import pytest
 from conftest import REPO, spin_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from woody_tools.graph import NodeProcess, entry_point
+from woody_tools.processes import NodeProcess, entry_point
 
 SAMPLE = REPO / "bags" / "sample" / "line.mcap"
 CAMERA_TOPICS = ["/top_camera/depth/image_raw", "/top_camera/depth/camera_info", "/side_camera/image_raw"]

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from woody_tools import results, traces
+from woody_tools import sweep_report, traces
 from woody_tools.experiment import RUN_COLUMNS
 
 MESHES = "generated:2:7"
@@ -60,7 +60,7 @@ def test_sweep_cli_rows_report_resume(tmp_path):
         assert paper_figure in md
     assert "evaluations/min" in md
     assert "**PASS**" in md or "**MISS**" in md
-    for name in results.PLOTS:
+    for name in sweep_report.PLOTS:
         assert (out / name).stat().st_size > 1000
 
     # --traces: every scored lane's window frame by frame, and one plot per mesh and speed
@@ -99,10 +99,10 @@ def test_sweep_cli_rows_report_resume(tmp_path):
 
 def test_threshold_and_roc_helpers():
     normal, severe = [15.0, 18.0, 20.0], [5.0, 7.0, 9.0]
-    t, bacc = results.best_threshold(normal, severe)
+    t, bacc = sweep_report.best_threshold(normal, severe)
     assert 9.0 < t < 15.0 and bacc == 1.0
-    assert results.roc(normal, severe)[2] == 1.0
-    assert results.accuracy(normal, severe, 8.0)[0] == pytest.approx(5 / 6)
+    assert sweep_report.roc(normal, severe)[2] == 1.0
+    assert sweep_report.accuracy(normal, severe, 8.0)[0] == pytest.approx(5 / 6)
 
 
 def test_runs_file_replaces_atomically(tmp_path, monkeypatch):

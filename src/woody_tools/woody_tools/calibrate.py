@@ -123,7 +123,7 @@ def _phi_split(rows: list[dict]) -> tuple[list[float], list[float]]:
 def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict, args: argparse.Namespace,
                      client) -> dict:
     """Φ cut on the calibration meshes, its accuracy on the held-out ones, and the top-view speed effect."""
-    from woody_tools import results
+    from woody_tools import sweep_report
 
     def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
         runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
@@ -133,9 +133,9 @@ def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict,
 
     cal_rows = rows_for(cal_names, args.meshes, "threshold (calibration set)")
     normal, severe = _phi_split(cal_rows)
-    threshold, bacc = results.best_threshold(normal, severe)
+    threshold, bacc = sweep_report.best_threshold(normal, severe)
     report = {"threshold": round(threshold, 2), "calibration_balanced_accuracy": bacc,
-              "calibration_auc": results.roc(normal, severe)[2], "calibration_n": [len(normal), len(severe)],
+              "calibration_auc": sweep_report.roc(normal, severe)[2], "calibration_n": [len(normal), len(severe)],
               "top_speed_effect": _speed_effect(cal_rows)}
     print(f"woody calibrate: Φ threshold = {report['threshold']:g} (balanced accuracy {bacc * 100:.1f} % on "
           f"{len(normal)} normal / {len(severe)} severe calibration fillets)")
@@ -154,16 +154,16 @@ def _speed_effect(rows: list[dict]) -> dict:
 
 
 def _held_out(rows: list[dict], threshold: float) -> list[dict]:
-    from woody_tools import results
+    from woody_tools import sweep_report
 
     per = []
     for speed in SPEEDS:
         for lane in (None, 0, 1, 2):
             sel = [r for r in rows if r["speed_fpm"] == speed and (lane is None or r["lane"] == lane)]
             n, s = _phi_split(sel)
-            acc, right, total = results.accuracy(n, s, threshold)
+            acc, right, total = sweep_report.accuracy(n, s, threshold)
             per.append({"speed_fpm": speed, "lane": "all" if lane is None else lane, "accuracy": acc,
-                        "right": right, "total": total, "auc": results.roc(n, s)[2]})
+                        "right": right, "total": total, "auc": sweep_report.roc(n, s)[2]})
             print(f"  held-out {speed:g} FPM lane {per[-1]['lane']}: accuracy {acc * 100:.1f} % ({right}/{total}), "
                   f"AUC {per[-1]['auc']:.3f}")
     return per

@@ -9,9 +9,9 @@ import sys
 SUBCOMMANDS = [
     ("run", "line_run", "run a multi-lane line: sim + vision + gate + recorder; bag, verdicts.csv, report.md"),
     ("replay", "replay", "republish a recorded bag with its original timing and /clock"),
-    ("report", "report_command", "rebuild report.md and plots from a bag or a verdicts.csv"),
+    ("report", "report", "rebuild report.md and plots from a bag or a verdicts.csv"),
     ("bag", "bag_command", "`woody bag info BAG`, `woody bag recover IN OUT` (rescue a recording cut short)"),
-    ("bench", "bench", "benchmarks: `woody bench sim`, `woody bench vision`, `woody bench graph`"),
+    ("bench", "benchmarks.command", "benchmarks: `woody bench sim`, `woody bench vision`, `woody bench graph`"),
     ("sweep", "sweep", "the paper's drop-test grid (meshes x k x speed), parallel and resumable; runs.csv, results.md"),
     ("meshes", "meshes_command",
      "mesh sets: `woody meshes stats SPEC...` prints shape descriptors per mesh and per set"),

@@ -27,8 +27,8 @@ from woody_common.stamps import stamp_to_seconds
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
 from woody_sim.sensor_model import PRESETS
 from woody_tools.cpu_usage import CpuAccounting
-from woody_tools.graph import DomainInUse, NodeProcess, lease_domain
-from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
+from woody_tools.processes import DomainInUse, NodeProcess, lease_domain
+from woody_tools.run_report import Spawn, Verdict, build_report, join, verdict_table, write_csv
 from woody_vision.segmentation import REAL_CAMERA_FILTERS
 
 MAX_LEAD_S = 0.1

@@ -228,9 +228,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     meta = _update_meta(out / META_FILE, failed, args, len(names), mass)
     if not args.no_report:
-        from woody_tools import results
+        from woody_tools import sweep_report
 
-        md = results.build(out, meta, docs=Path(args.docs) if args.docs else None)
+        md = sweep_report.build(out, meta, docs=Path(args.docs) if args.docs else None)
         print(f"woody sweep: wrote {md}", file=sys.stderr)
     if args.traces:
         _report_traces(out)

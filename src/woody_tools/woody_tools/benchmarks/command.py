@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from woody_common.stamps import stamp_to_seconds
-from woody_tools.graph import NodeProcess, entry_point, lease_domain
+from woody_tools.processes import NodeProcess, entry_point, lease_domain
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -86,8 +86,8 @@ def with_reference(figures: dict, reference: float) -> dict:
 
 
 def bench_sim(seconds: float) -> dict:
-    from woody_sim.line_world import benchmark_physics
-    from woody_sim.rendering import benchmark_rendering
+    from woody_tools.benchmarks.physics import benchmark_physics
+    from woody_tools.benchmarks.rendering import benchmark_rendering
 
     physics = {n: benchmark_physics(n, seconds) for n in (1, 3, 6)}
     render = benchmark_rendering(n_fillets=3, frames=120)
@@ -154,8 +154,8 @@ def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_
 
 
 def bench_vision(frames: int, seconds: float) -> dict:
-    from woody_tools.vision_latency import measure_verdict_latency
-    from woody_vision.bench import benchmark_vision
+    from woody_tools.benchmarks.verdict_latency import measure_verdict_latency
+    from woody_tools.benchmarks.vision import benchmark_vision
 
     figures = dict(benchmark_vision(frames=frames))
     latency = measure_verdict_latency(seconds)  # closing frame published -> verdict received, across processes
