@@ -143,7 +143,11 @@ def test_killed_recorder_leaves_its_written_chunks_readable(ros_domain, spawn_he
     summary = bag_summary(path)
     assert not summary["complete"] and "truncated" in summary["error"]
 
-    # `woody bag recover` turns it into a complete, indexed bag that rosbags and mcap open
+    _check_recovered(path, tmp_path / "fixed.mcap", safe, len(clock))
+
+
+def _check_recovered(path, fixed, safe: int, clock_count: int) -> None:
+    """`woody bag recover` turns a cut bag into a complete, indexed bag that rosbags and mcap open."""
     import subprocess
 
     from mcap.reader import make_reader
@@ -151,14 +155,13 @@ def test_killed_recorder_leaves_its_written_chunks_readable(ros_domain, spawn_he
 
     from woody_tools.processes import entry_point
 
-    fixed = tmp_path / "fixed.mcap"
     result = subprocess.run([entry_point("woody"), "bag", "recover", str(path), str(fixed)], capture_output=True,
                             text=True, timeout=120)
     assert result.returncode == 0 and "truncated after" in result.stdout, result.stderr
     assert bag_summary(fixed)["complete"] and bag_summary(fixed)["message_count"] >= safe * len(TOPICS)
     with AnyReader([fixed]) as reader:
         clock_connections = [c for c in reader.connections if c.topic == "/clock"]
-        assert len(list(reader.messages(connections=clock_connections))) == len(clock)
+        assert len(list(reader.messages(connections=clock_connections))) == clock_count
     with open(fixed, "rb") as handle:
         assert make_reader(handle).get_summary().statistics.message_count == bag_summary(fixed)["message_count"]
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import rclpy
@@ -52,6 +53,17 @@ class LineSim(Node):
 
     def __init__(self) -> None:
         super().__init__("line_sim")
+        p = self._declare_parameters()
+        self._build_line(p)
+        self._create_interfaces(p)
+        self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
+            f"{p.lanes} lanes at {p.speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(self.meshes)} meshes, "
+            f"k from {self.k_values}, "
+            f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {p.top_rate:g} Hz, "
+            f"side {p.side_rate:g} Hz on lane {self.geometry.watched_lane}, top camera model {self.sensor.name}")
+
+    def _declare_parameters(self) -> SimpleNamespace:
+        """Declare and check every parameter; the node's own settings become attributes, the rest is returned."""
         lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
         speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
                             "commercial line speeds).", *SPEED_RANGE_FPM)
@@ -96,26 +108,35 @@ class LineSim(Node):
             raise ValueError(f"k_values must be a non-empty list of finite values >= 0, got {self.k_values}")
         if side_lane >= lanes:
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
+        return SimpleNamespace(
+            lanes=lanes, speed_fpm=speed_fpm, mesh_spec=mesh_spec, seed=seed, spacing=spacing, rate=rate,
+            damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, segments=segments,
+            top_rate=top_rate, side_rate=side_rate, side_idle=side_idle, side_lane=side_lane,
+            top_camera=top_camera, max_lead=max_lead)
 
-        self.speed = fpm_to_mps(speed_fpm)
-        self.geometry = LineGeometry(lanes=lanes, side_lane=side_lane, **top_camera_preset(top_camera))
+    def _build_line(self, p: SimpleNamespace) -> None:
+        """The simulated line: geometry, physics world, mesh set, spawn schedule, frame timing, renderer."""
+        self.speed = fpm_to_mps(p.speed_fpm)
+        self.geometry = LineGeometry(lanes=p.lanes, side_lane=p.side_lane, **top_camera_preset(p.top_camera))
         self.world = LineWorld(self.geometry, PhysicsConfig(
-            n_segments=segments, damping=damping, friction_static=mu_static, friction_dynamic=mu_dynamic))
-        meshes, errors = load_mesh_set(mesh_spec)
+            n_segments=p.segments, damping=p.damping, friction_static=p.mu_static, friction_dynamic=p.mu_dynamic))
+        meshes, errors = load_mesh_set(p.mesh_spec)
         for error in errors:
             self.get_logger().error(error)
         if not meshes:
-            raise ValueError(f"mesh set '{mesh_spec}' has no loadable mesh")
+            raise ValueError(f"mesh set '{p.mesh_spec}' has no loadable mesh")
         self.meshes = {m.name: m for m in meshes}
-        interval = 60.0 / rate if rate > 0 else spacing / self.speed
-        self.schedule = SpawnSchedule(meshes=meshes, k_values=self.k_values, lanes=lanes, interval_s=interval,
-                                      seed=seed)
+        interval = 60.0 / p.rate if p.rate > 0 else p.spacing / self.speed
+        self.schedule = SpawnSchedule(meshes=meshes, k_values=self.k_values, lanes=p.lanes, interval_s=interval,
+                                      seed=p.seed)
         self.spawned = 0
-        self.top_period = 1.0 / top_rate
-        self.side_period = 1.0 / side_rate if side_rate > 0 else None
-        self.side_gate = SideFrameGate(idle_period_s=1.0 / side_idle)
+        self.top_period = 1.0 / p.top_rate
+        self.side_period = 1.0 / p.side_rate if p.side_rate > 0 else None
+        self.side_gate = SideFrameGate(idle_period_s=1.0 / p.side_idle)
         self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
 
+    def _create_interfaces(self, p: SimpleNamespace) -> None:
+        """Publishers (clock, ground truth, cameras, camera poses), the spawn service and the pacing subscription."""
         latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         camera_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -134,15 +155,11 @@ class LineSim(Node):
                           for name in ("top_camera", "side_camera")]
         for publisher, camera in zip(self.pose_pubs, (self.geometry.top_camera(), self.geometry.side_camera())):
             publisher.publish(_camera_pose(camera))
-        self.pacer = LeadLimiter(max_lead) if max_lead > 0 else None
+        self.pacer = LeadLimiter(p.max_lead) if p.max_lead > 0 else None
         if self.pacer is not None:
             self.create_subscription(FilletTrackArray, topics.TRACKS,
                                      lambda m: self.pacer.ack(stamp_to_seconds(m.header.stamp)),
                                      QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
-        self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
-            f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
-            f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
-            f"side {side_rate:g} Hz on lane {self.geometry.watched_lane}, top camera model {self.sensor.name}")
 
     # ------------------------------------------------------------------ spawning
 

@@ -21,6 +21,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 
+from woody_tools.cpu_usage import cpu_seconds
 from woody_tools.mcap_io import bag_summary
 from woody_tools.processes import NodeProcess, lease_domain
 
@@ -45,11 +46,6 @@ def frames(width, height, noise, depth=False, n=16):
             img = np.clip(img, 0, 255).astype(np.uint8)
         out.append(img.tobytes())
     return out
-
-
-def cpu_seconds(pid):
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def main():
