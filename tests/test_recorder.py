@@ -8,18 +8,15 @@ killed one (SIGKILL) leaves every chunk written before the kill readable.
 from __future__ import annotations
 
 import signal
-import sys
 import time
 from pathlib import Path
 
 import pytest
 from conftest import REPO
+from fixtures.known_messages import TOPICS, index_of, known, same
 
-sys.path.insert(0, str(REPO / "tests" / "helpers"))
-from known_messages import TOPICS, index_of, known, same  # noqa: E402
-
-from woody_tools.mcap_io import BagError, bag_summary, decode, read_bag  # noqa: E402
-from woody_tools.processes import NodeProcess, wait_for  # noqa: E402
+from woody_tools.mcap_io import BagError, bag_summary, decode, read_bag
+from woody_tools.processes import NodeProcess, wait_for
 
 COUNT = 20
 
