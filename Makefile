@@ -8,7 +8,7 @@ setup:
 	@scripts/setup.sh $(VENV)
 
 demo: setup
-	$(VENV)/bin/woody run --fillets 12 --out bags/demo
+	$(VENV)/bin/woody run --fillets 12 --out bags/demo --force
 
 lint: setup
 	$(VENV)/bin/ruff check .

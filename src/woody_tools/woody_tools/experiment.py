@@ -91,7 +91,7 @@ class RunSpec:
         """PhysicsConfig fields this run sets itself (the rest come from the calibration)."""
         out = {} if self.damping is None else {"damping": self.damping}
         if self.friction_static is not None:
-            out.update(friction_static=self.friction_static, friction_dynamic=0.75 * self.friction_static)
+            out.update(friction_static=self.friction_static, friction_dynamic=round(0.75 * self.friction_static, 6))
         return out
     sensor: str = "ideal"
     """Top camera error model (woody_sim.sensor_model preset), seeded per run."""

@@ -38,5 +38,9 @@ DELTA_NMDM_RANGE = (0.20, 0.32)
 NMDM_NORMAL_RANGE = (0.42, 0.62)
 SPEED_GAIN_MIN = 0.05
 """NMDM(k=0) at 130 FPM must exceed its 100 FPM value by at least this (paper: +0.155)."""
+PHI_SPEED_DROP_MIN = 0.10
+"""Φ(k=0) at 130 FPM at least 10 % below its 100 FPM value (paper −22 %)."""
+PHI_SD_FACTOR = 1.5
+"""The Φ sd per class within this factor of the paper's (100 FPM)."""
 PHI_RATIO_MIN = 3.0
 ACCURACY_MIN = 0.97

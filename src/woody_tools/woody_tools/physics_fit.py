@@ -32,7 +32,7 @@ class FitPoint:
 
     @property
     def friction_dynamic(self) -> float:
-        return 0.75 * self.friction_static
+        return round(0.75 * self.friction_static, 6)
 
 
 def table_means(rows: list[dict]) -> dict[tuple[float, float], tuple[float, float]]:

@@ -28,7 +28,10 @@ from woody_tools.paper_targets import (
     PAPER_SIDE,
     PAPER_TOP,
     PHI_RATIO_MIN,
+    PHI_SD_FACTOR,
+    PHI_SPEED_DROP_MIN,
     PHYSICAL_DELTA_NMDM,
+    SPEED_GAIN_MIN,
 )
 
 FULL_GRID_EVALS = 1000 * 6 * 2 * 3
@@ -127,6 +130,34 @@ def best_threshold(normal: Sequence[float], severe: Sequence[float]) -> tuple[fl
 
 
 # ------------------------------------------------------------------ selection helpers
+
+def physics_checks(rows: list[dict], side_rows: list[dict]) -> list[tuple[str, bool | None, str]]:
+    """The physics calibration's targets: k = 0 speed effects, BE falling with k, the spread of Φ per class."""
+    checks = []
+    n = {s: mean_sd(_select(side_rows, s, 0.0, column="nmdm"))[0] for s in (100.0, 130.0)}
+    if all(math.isfinite(v) for v in n.values()):
+        checks.append((f"side: NMDM(k=0) at 130 FPM ≥ {SPEED_GAIN_MIN} above 100 FPM",
+                       n[130.0] - n[100.0] >= SPEED_GAIN_MIN,
+                       f"{n[130.0]:.3f} − {n[100.0]:.3f} = {n[130.0] - n[100.0]:+.3f} (paper +0.155)"))
+    be = [(k, mean_sd(_select(side_rows, 100.0, k, column="be"))[0]) for k in sorted({r["k"] for r in side_rows})]
+    be = [(k, v) for k, v in be if math.isfinite(v)]
+    if len(be) >= 2:
+        checks.append(("side 100 FPM: BE falls monotonically with k",
+                       all(b < a for (_, a), (_, b) in zip(be, be[1:])),
+                       ", ".join(f"k={k:g}: {v:.1f}" for k, v in be) + " (paper k=0 37.6, k=100 19.3)"))
+    phi = {s: mean_sd(_select(rows, s, 0.0))[0] for s in (100.0, 130.0)}
+    if all(math.isfinite(v) for v in phi.values()):
+        drop = 1.0 - phi[130.0] / phi[100.0]
+        checks.append((f"top: Φ(k=0) at 130 FPM ≥ {PHI_SPEED_DROP_MIN:.0%} below 100 FPM", drop >= PHI_SPEED_DROP_MIN,
+                       f"{phi[130.0]:.2f} vs {phi[100.0]:.2f}: {drop:.0%} lower (paper 14.91 vs 19.12: 22 %)"))
+    for k in (0.0, 100.0):
+        sd, paper = mean_sd(_select(rows, 100.0, k))[1], PAPER_TOP.get(100.0, {}).get(k)
+        if paper is not None and math.isfinite(sd):
+            ratio = sd / paper[1]
+            checks.append((f"top 100 FPM: Φ sd at k={k:g} within ×{PHI_SD_FACTOR} of the paper's",
+                           1.0 / PHI_SD_FACTOR <= ratio <= PHI_SD_FACTOR, f"{sd:.2f} vs {paper[1]:.2f} (×{ratio:.2f})"))
+    return checks
+
 
 def _select(rows, speed=None, k=None, lane=None, column="phi"):
     out = []
@@ -326,7 +357,8 @@ def _top_view(grid: _Grid) -> tuple[list[str], list]:
             L.append(f"| {speed:g} | {k:g} | {phi[2]} | {_fmt(*phi, 2)} | {pp[0]} | {hu[0]:.3f} | {pp[1]} | "
                      f"{so[0]:.4f} | {pp[2]} |")
     L.append("")
-    return L, _top_checks(grid.speeds, [k for k in ks if k in PAPER_TOP.get(100.0, {})], top_means)
+    top_k = [k for k in ks if k in PAPER_TOP.get(100.0, {})]
+    return L, _top_checks(grid.speeds, top_k, top_means) + physics_checks(rows, grid.side_rows)
 
 
 def _top_checks(speeds: list[float], top_k: list[float], top_means: dict[tuple[float, float], float]) -> list:
