@@ -25,7 +25,7 @@ from std_msgs.msg import Header
 
 from woody_common import topics
 from woody_common.calibration import load_calibration
-from woody_common.line import SPEED_RANGE_FPM, fpm_to_mps
+from woody_common.line import LANES, SPEED_RANGE_FPM, fpm_to_mps
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
@@ -64,7 +64,7 @@ class LineSim(Node):
 
     def _declare_parameters(self) -> SimpleNamespace:
         """Declare and check every parameter; the node's own settings become attributes, the rest is returned."""
-        lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
+        lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, 6)
         speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
                             "commercial line speeds).", *SPEED_RANGE_FPM)
         self.k_values = [float(k) for k in declare(self, "k_values", [0.0, 100.0],
