@@ -2,7 +2,7 @@
 VENV ?= .venv
 PYTEST_ARGS ?=
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo lint test bench clean
 
 setup:
 	@scripts/setup.sh $(VENV)
@@ -10,7 +10,10 @@ setup:
 demo: setup
 	$(VENV)/bin/woody run --fillets 12 --out bags/demo --force
 
-test: setup
+lint: setup
+	$(VENV)/bin/ruff check .
+
+test: setup lint
 	$(VENV)/bin/python -m pytest tests $(PYTEST_ARGS)
 
 bench: setup

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy
 
 CONTAINER_PYTHON_INCLUDE = re.compile(r"/opt/python/cp3\d+-cp3\d+/include/python3\.\d+")
-CONTAINER_NUMPY_INCLUDE = re.compile(r"/opt/python/cp3\d+-cp3\d+/lib/python3\.\d+/site-packages/numpy/(?:_core|core)/include")
+CONTAINER_NUMPY_INCLUDE = re.compile(
+    r"/opt/python/cp3\d+-cp3\d+/lib/python3\.\d+/site-packages/numpy/(?:_core|core)/include")
 
 
 def patch(prefix: Path) -> int:

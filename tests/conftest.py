@@ -10,13 +10,21 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+TESTS = REPO / "tests"
+FIXTURES = TESTS / "fixtures"
+"""Helper processes the graph tests start (publishers, a replay wrapper)."""
+
+
+def fixture_env(domain_id: int) -> dict[str, str]:
+    """Environment of a helper process: the test's domain, unbuffered output, tests/ importable (msg_samples)."""
+    path = os.pathsep.join(p for p in (str(TESTS), os.environ.get("PYTHONPATH", "")) if p)
+    return dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED="1", PYTHONPATH=path)
 
 
 @pytest.fixture
 def ros_domain():
     """A ROS domain id that no other test or run on this machine is using."""
-    from woody_tools.graph import lease_domain
+    from woody_tools.processes import lease_domain
 
     env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
     with lease_domain(env) as lease:
@@ -38,14 +46,13 @@ def ros_node(ros_domain):
 
 @pytest.fixture
 def spawn_helper(ros_domain, tmp_path):
-    """Start `python tests/helpers/<script>.py args...` on the test's domain; killed after the test."""
+    """Start `python tests/fixtures/<script>.py args...` on the test's domain; killed after the test."""
     procs = []
 
     def start(script: str, *args: str) -> subprocess.Popen:
-        env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), PYTHONUNBUFFERED="1")
         log = open(tmp_path / f"{script}.log", "w")
-        proc = subprocess.Popen([sys.executable, str(REPO / "tests" / "helpers" / f"{script}.py"), *args],
-                                stdout=log, stderr=subprocess.STDOUT, env=env)
+        proc = subprocess.Popen([sys.executable, str(FIXTURES / f"{script}.py"), *args],
+                                stdout=log, stderr=subprocess.STDOUT, env=fixture_env(ros_domain))
         procs.append((proc, log))
         return proc
 

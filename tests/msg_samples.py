@@ -7,6 +7,7 @@ import math
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point
 from std_msgs.msg import Header
+
 from woody_msgs.msg import FilletSpawn, FilletTrack, FilletTrackArray, FilletVerdict, GateCommand
 from woody_msgs.srv import SpawnFillet
 

@@ -11,11 +11,10 @@ import subprocess
 from pathlib import Path
 
 import pytest
-
 from test_recorder import _bag_of_known
 
-from woody_tools.graph import entry_point
 from woody_tools.mcap_io import BagError, bag_summary, read_bag
+from woody_tools.processes import entry_point
 
 
 def woody(*args: str) -> subprocess.CompletedProcess:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from woody_tools.bench import reference_ms, with_reference
+from woody_tools.benchmarks.command import reference_ms, with_reference
 
 
 def test_reference_workload_takes_measurable_time():

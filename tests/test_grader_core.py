@@ -45,7 +45,8 @@ def feed(grader: FilletGrader, track_id: int, lane: int, shapes, t0: float = 0.0
         out += [(stamp, g) for g in grader.on_tracks(stamp, [TrackObservation(track_id, lane, contour)])]
     for j in range(extra_after):  # stale frames of the same track (unseen) and empty frames
         stamp += 1 / FPS
-        out += [(stamp, g) for g in grader.on_tracks(stamp, [TrackObservation(track_id, lane, shapes[-1], unseen=j + 1)])]
+        stale = TrackObservation(track_id, lane, shapes[-1], unseen=j + 1)
+        out += [(stamp, g) for g in grader.on_tracks(stamp, [stale])]
     if end:
         stamp += 1 / FPS
         out += [(stamp, g) for g in grader.on_tracks(stamp, [], ended_ids=[track_id])]

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_frame_checks import image_msg
 
-from test_vision import image_msg
 from woody_vision.frame_checks import FrameError
 from woody_vision.image_encodings import color_rgb, depth_metres, match_size
 from woody_vision.segmentation import BackgroundModel, segment_depth

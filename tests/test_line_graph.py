@@ -4,19 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import spin_until
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from conftest import spin_until
-from woody_tools.graph import NodeProcess
-
-
-def _seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
+from woody_common.stamps import stamp_to_seconds
+from woody_tools.processes import NodeProcess
 
 
 def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_path):
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import CameraInfo, Image
+
     from woody_msgs.msg import FilletSpawn
 
     duration = 3.0
@@ -29,7 +27,7 @@ def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_pa
     reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     for name, msg_type in topics.items():
         ros_node.create_subscription(msg_type, name, lambda m, n=name: received[n].append(m), reliable)
-    ros_node.create_subscription(Clock, "/clock", lambda m: received["/clock"].append(_seconds(m.clock)), 100)
+    ros_node.create_subscription(Clock, "/clock", lambda m: received["/clock"].append(stamp_to_seconds(m.clock)), 100)
     ros_node.create_subscription(FilletSpawn, "/line/ground_truth", received["/line/ground_truth"].append,
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
@@ -43,7 +41,7 @@ def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_pa
         assert sim.stop() == 0, sim.log_tail()
 
     def stamps(name):
-        return np.array([_seconds(m.header.stamp) for m in received[name]])
+        return np.array([stamp_to_seconds(m.header.stamp) for m in received[name]])
 
     top, side = stamps("/top_camera/depth/image_raw"), stamps("/side_camera/image_raw")
     assert abs(len(top) - 30 * duration) <= 3, len(top)
@@ -106,10 +104,9 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
 
 def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_domain, tmp_path):
     """16UC1 millimetre depth with 0 where nothing was measured, noisy colour, a few dropped frames at most."""
-    from sensor_msgs.msg import Image
-
     from geometry_msgs.msg import PoseStamped
     from scipy.spatial.transform import Rotation
+    from sensor_msgs.msg import Image
 
     frames: dict[str, list] = {"depth": [], "color": []}
     best_effort = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -143,7 +140,7 @@ def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_d
 def test_bad_parameters_are_refused_with_the_reason(tmp_path):
     import subprocess
 
-    from woody_tools.graph import entry_point
+    from woody_tools.processes import entry_point
 
     cases = {
         "line_sim": [("line_speed_fpm", "0.0", "line_speed_fpm"), ("lanes", "7", "lanes"),

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from woody_sim.mesh_stats import DESCRIPTOR_NAMES, describe, outside_range, summarize
+from woody_sim.mesh_stats import describe, outside_range, summarize
 from woody_sim.meshes import (
     BUILTIN_DIR,
     BUILTIN_REFERENCE_NAMES,

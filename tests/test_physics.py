@@ -54,7 +54,7 @@ def test_masses_follow_the_slab_volumes(fillet: FilletMesh) -> None:
 
 def test_segment_visuals_are_small_closed_pieces_in_the_segment_frames(fillet: FilletMesh) -> None:
     model = build_fillet_model(fillet)
-    for visual, centre, half in zip(model.visuals, model.box_centers, model.box_half_extents):
+    for visual, _centre, half in zip(model.visuals, model.box_centers, model.box_half_extents):
         assert isinstance(visual, SegmentVisual)
         assert visual.vertices.dtype == np.float32 and visual.faces.dtype == np.int32
         assert 100 <= len(visual.faces) <= 300

@@ -8,19 +8,15 @@ killed one (SIGKILL) leaves every chunk written before the kill readable.
 from __future__ import annotations
 
 import signal
-import sys
 import time
 from pathlib import Path
 
 import pytest
-
 from conftest import REPO
+from fixtures.known_messages import TOPICS, index_of, known, same
 
-sys.path.insert(0, str(REPO / "tests" / "helpers"))
-from known_messages import TOPICS, index_of, known, same  # noqa: E402
-
-from woody_tools.graph import NodeProcess, wait_for  # noqa: E402
-from woody_tools.mcap_io import BagError, bag_summary, decode, read_bag  # noqa: E402
+from woody_tools.mcap_io import BagError, bag_summary, decode, read_bag
+from woody_tools.processes import NodeProcess, wait_for
 
 COUNT = 20
 
@@ -144,22 +140,25 @@ def test_killed_recorder_leaves_its_written_chunks_readable(ros_domain, spawn_he
     summary = bag_summary(path)
     assert not summary["complete"] and "truncated" in summary["error"]
 
-    # `woody bag recover` turns it into a complete, indexed bag that rosbags and mcap open
+    _check_recovered(path, tmp_path / "fixed.mcap", safe, len(clock))
+
+
+def _check_recovered(path, fixed, safe: int, clock_count: int) -> None:
+    """`woody bag recover` turns a cut bag into a complete, indexed bag that rosbags and mcap open."""
     import subprocess
 
     from mcap.reader import make_reader
     from rosbags.highlevel import AnyReader
 
-    from woody_tools.graph import entry_point
+    from woody_tools.processes import entry_point
 
-    fixed = tmp_path / "fixed.mcap"
     result = subprocess.run([entry_point("woody"), "bag", "recover", str(path), str(fixed)], capture_output=True,
                             text=True, timeout=120)
     assert result.returncode == 0 and "truncated after" in result.stdout, result.stderr
     assert bag_summary(fixed)["complete"] and bag_summary(fixed)["message_count"] >= safe * len(TOPICS)
     with AnyReader([fixed]) as reader:
         clock_connections = [c for c in reader.connections if c.topic == "/clock"]
-        assert len(list(reader.messages(connections=clock_connections))) == len(clock)
+        assert len(list(reader.messages(connections=clock_connections))) == clock_count
     with open(fixed, "rb") as handle:
         assert make_reader(handle).get_summary().statistics.message_count == bag_summary(fixed)["message_count"]
 
@@ -240,5 +239,5 @@ def test_a_damaged_chunk_stops_reading_with_one_line(tmp_path):
     data[middle:middle + 32] = bytes(32)
     full.write_bytes(bytes(data))
     with pytest.raises(BagError, match=r"full\.mcap: corrupt after \d+ messages at t=[\d.]+s \("):
-        for topic, type_name, raw, _ in read_bag(full):
+        for _topic, type_name, raw, _ in read_bag(full):
             decode(type_name, raw)

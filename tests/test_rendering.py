@@ -8,8 +8,14 @@ import numpy as np
 import pytest
 
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
-from woody_sim.rendering import (LineRenderer, RenderProcess, camera_info_fields, draped_poses, flat_poses,
-                                 load_reference_visuals)
+from woody_sim.rendering import (
+    LineRenderer,
+    RenderProcess,
+    camera_info_fields,
+    draped_poses,
+    flat_poses,
+    load_reference_visuals,
+)
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +61,10 @@ def test_fillet_bent_over_the_roller_covers_less_of_the_top_view(geometry, refer
     _, flat = renderer.render_top({0: flat_poses(offsets, -0.35, y)})
     _, bent = renderer.render_top({0: draped_poses(offsets, 0.02, y, geometry.roller_radius)})
     background = renderer.render_top({})[1]
-    area = lambda depth: int((background - depth > 0.003).sum())
+
+    def area(depth):
+        return int((background - depth > 0.003).sum())
+
     assert area(bent) < 0.8 * area(flat)
 
 

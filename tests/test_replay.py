@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import subprocess
 import sys
@@ -11,16 +10,13 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import FIXTURES, fixture_env, spin_until
+from fixtures.known_messages import TOPICS, index_of, known
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 
-from conftest import REPO, spin_until
-
-sys.path.insert(0, str(REPO / "tests" / "helpers"))
-from known_messages import TOPICS, index_of, known  # noqa: E402
-
-from woody_tools import replay  # noqa: E402
-from woody_tools.mcap_io import BagError, BagWriter, read_bag  # noqa: E402
+from woody_tools import replay
+from woody_tools.mcap_io import BagError, BagWriter, read_bag
 
 T0 = 1_700_000_000 * 10**9  # log time of the first message (wall clock of a past recording)
 TRACKS = "/vision/tracks"
@@ -76,10 +72,9 @@ class Listener:
 
 
 def start_replay(domain: int, tmp_path: Path, *args: str) -> subprocess.Popen:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, str(REPO / "tests" / "helpers" / "replay_cli.py"), *args,
+    return subprocess.Popen([sys.executable, str(FIXTURES / "replay_cli.py"), *args,
                              "--wait-for-subscribers", "10", "--progress", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=fixture_env(domain))
 
 
 def assert_timing(arrivals: list[float], expected: list[float], rate: float) -> None:

@@ -1,32 +1,44 @@
-"""The report's honesty: line accuracy beside scored accuracy, and the Φ threshold on the plot."""
+"""`woody report` through the real entry point: a bag cut short still gives a report saying where it ends;
+unreadable input or an unwritable --out is one line and exit code 2."""
 
 from __future__ import annotations
 
-import math
+import subprocess
 
-from woody_tools.report import Spawn, Verdict, accuracy, accuracy_title, build_report, join, report_threshold
+import pytest
+from conftest import REPO
 
+from woody_tools.processes import entry_point
 
-def rows_with_an_unscored_woody_fillet() -> list[dict]:
-    spawns = [Spawn(sim_id=i, lane=i, mesh="m", k=k, mass=20.0, line_speed=0.508, stamp=0.0, spawn_x=-1.016)
-              for i, k in enumerate((0.0, 100.0, 100.0))]
-    verdicts = [Verdict(fillet_id=10 + i, lane=i, stamp=2.0, classification=c, grade="", phi=phi, hu_term=0.1,
-                        solidity_term=0.01, nmdm=math.nan, mdm=math.nan, be=math.nan, threshold=11.02)
-                for i, (c, phi) in enumerate((("normal", 18.0), ("woody", 8.0), ("unscored", math.nan)))]
-    return join(spawns, verdicts)
+SAMPLE = REPO / "bags" / "sample"
 
 
-def test_an_unscored_woody_fillet_lowers_the_line_accuracy_not_the_scored_one():
-    acc = accuracy(rows_with_an_unscored_woody_fillet())
-    assert (acc.scored, acc.correct, acc.unscored) == (2, 2, 1)
-    assert acc.accuracy == 1.0 and math.isclose(acc.line_accuracy, 2 / 3)
-    assert accuracy_title(acc) == "line accuracy 66.7%, scored 100.0%"
+def report(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([entry_point("woody"), "report", *args], capture_output=True, text=True, timeout=120)
 
 
-def test_the_report_states_both_accuracies_and_draws_the_graders_threshold(tmp_path):
-    rows = rows_with_an_unscored_woody_fillet()
-    assert report_threshold(rows, None) == 11.02
-    assert report_threshold([], {"threshold": "9.5"}) == 9.5
-    text = build_report(rows, tmp_path, notes=["skipped mesh x.stl: not a valid STL"]).read_text()
-    assert "line accuracy (every fillet; one without a verdict is not diverted): **66.7%**" in text
-    assert "accuracy: **100.0%**" in text and "- skipped mesh x.stl: not a valid STL" in text
+def test_a_bag_cut_short_is_reported_up_to_where_it_ends(tmp_path):
+    data = (SAMPLE / "line.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:int(len(data) * 0.9)])
+    result = report(str(cut), "--out", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    assert "truncated after" in result.stderr and "reporting its readable part" in result.stderr
+    text = (tmp_path / "out" / "report.md").read_text()
+    assert "the bag ends early: " in text and "truncated after" in text
+    rows = (tmp_path / "out" / "verdicts.csv").read_text().splitlines()
+    assert len(rows) == 1 + 3  # the three fillets the readable part holds
+
+
+@pytest.mark.parametrize("args,message", [
+    (["{tmp}/nothing.mcap"], "no such file"),
+    (["{tmp}/bad.mcap"], "not an MCAP file"),
+    ([str(SAMPLE / "verdicts.csv"), "--out", "/proc/woody"], "/proc/woody"),
+    ([str(SAMPLE / "line.mcap"), "--out", "/proc/woody"], "/proc/woody"),
+])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
+    (tmp_path / "bad.mcap").write_text("not a bag")
+    result = report(*[a.format(tmp=tmp_path) for a in args])
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("woody report: ") and message in lines[0], lines

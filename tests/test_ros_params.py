@@ -1,6 +1,6 @@
 """Every node's command line through the real entry points: a bad argument is one line and exit code 2.
 
-Covers `woody_sim.ros_params` (declare, check_overrides, init_checked, run_node) as every
+Covers `woody_common.ros_params` (declare, check_overrides, init_checked, run_node) as every
 node uses it: unknown names are refused with the known ones, malformed overrides and
 stray arguments never reach a traceback, untyped lists are refused, ``--help`` lists the
 parameters, and every declared parameter is read-only (they are read at start-up).
@@ -17,8 +17,8 @@ import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
 
-from woody_sim.ros_params import declare
-from woody_tools.graph import entry_point
+from woody_common.ros_params import declare
+from woody_tools.processes import entry_point
 
 NODES = ["line_sim", "segmenter", "grader", "reject_gate", "recorder"]
 
@@ -37,7 +37,8 @@ def error_lines(result: subprocess.CompletedProcess) -> list[str]:
 
 @pytest.mark.parametrize("command,expected", [
     *[((node, "--ros-args", "-p", "line_sped_fpm:=130"), "unknown parameter line_sped_fpm") for node in NODES],
-    (("grader", "--ros-args", "-p", "lanes:=["), "bad --ros-args: Couldn't parse parameter override rule: '-p lanes:=['"),
+    (("grader", "--ros-args", "-p", "lanes:=["),
+     "bad --ros-args: Couldn't parse parameter override rule: '-p lanes:=['"),
     (("segmenter", "--ros-args", "-p", "lanes"), "bad --ros-args: Couldn't parse parameter override rule: '-p lanes'"),
     (("line_sim", "--ros-args", "-p", "k_values:=[]"), "parameter k_values: needs a value like [0.0, 100.0]"),
     (("reject_gate", "--ros-args", "-p", "gate_distance_m:=[]"), "parameter gate_distance_m: needs a value like [0.6]"),
@@ -74,7 +75,7 @@ def test_declared_parameters_are_read_only():
     import rclpy
     from rclpy.node import Node
 
-    from woody_sim.ros_params import declare
+    from woody_common.ros_params import declare
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=0)
@@ -112,7 +113,7 @@ def test_every_node_stops_cleanly_with_one_summary_line(ros_domain, tmp_path, no
     import signal
     import time
 
-    from woody_tools.graph import wait_for
+    from woody_tools.processes import wait_for
 
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), PYTHONUNBUFFERED="1")
     log = tmp_path / "node.log"

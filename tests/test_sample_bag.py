@@ -1,4 +1,6 @@
-"""The committed sample bag: readable by independent readers, and replaying it into the vision nodes reproduces its verdicts."""
+"""The committed sample bag: readable by independent readers.
+
+Replaying it into the vision nodes reproduces its verdicts."""
 
 from __future__ import annotations
 
@@ -7,10 +9,10 @@ import subprocess
 import sys
 
 import pytest
+from conftest import REPO, spin_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from conftest import REPO, spin_until
-from woody_tools.graph import NodeProcess, entry_point
+from woody_tools.processes import NodeProcess, entry_point
 
 SAMPLE = REPO / "bags" / "sample" / "line.mcap"
 CAMERA_TOPICS = ["/top_camera/depth/image_raw", "/top_camera/depth/camera_info", "/side_camera/image_raw"]

@@ -13,8 +13,9 @@ import cv2
 import numpy as np
 import pytest
 
+from woody_common.line import TOP_CAMERA_HEIGHT_M
 from woody_vision.camera_model import LaneLayout
-from woody_vision.segmentation import Blob, segment_depth
+from woody_vision.segmentation import segment_depth
 from woody_vision.shape_score import (
     REASON_LOST_BEFORE_EDGE,
     REASON_LOST_IN_WINDOW,
@@ -22,7 +23,6 @@ from woody_vision.shape_score import (
     STATUS_SCORED,
     STATUS_UNSCORED,
     ShapeEvaluator,
-    ShapeScorer,
     aspect_ratio,
     clip_body,
     fill_rows,
@@ -31,12 +31,11 @@ from woody_vision.shape_score import (
     shape_terms,
     solidity,
 )
-from woody_vision.synthetic import DEFAULT_CAMERA_HEIGHT_M, DEFAULT_TOP_K, TopFillet, TopScene, teardrop_polygon
-from woody_vision.tracking import CentroidTracker
+from woody_vision.synthetic import DEFAULT_TOP_K, TopFillet, TopScene, teardrop_polygon
 
 EDGE = 200.0
 FPS = 30.0
-LAYOUT3 = LaneLayout(DEFAULT_TOP_K, DEFAULT_CAMERA_HEIGHT_M, 3, 0.16)
+LAYOUT3 = LaneLayout(DEFAULT_TOP_K, TOP_CAMERA_HEIGHT_M, 3, 0.16)
 
 
 def polygon_contour(points) -> np.ndarray:
@@ -298,25 +297,10 @@ def test_unscored_when_the_track_is_lost_in_the_window_or_before_the_body_reache
     assert early.finish().reason == REASON_LOST_BEFORE_EDGE
 
 
-def test_shape_scorer_reports_each_track_once_with_its_id_and_lane():
-    scorer = ShapeScorer(EDGE)
-    contours = translating(80)
-    tracker = CentroidTracker(lane_layout=LAYOUT3, max_distance_px=40.0, max_unseen=3)
-    results = []
-    for i, contour in enumerate(contours[:60]):
-        m = cv2.moments(contour)
-        blob = Blob(contour, (m["m10"] / m["m00"], m["m01"] / m["m00"]), int(m["m00"]), cv2.boundingRect(contour), 0.02)
-        results += scorer.update(tracker.update([blob]), i / FPS)
-    for i in range(60, 64):
-        results += scorer.update(tracker.update([]), i / FPS)
-    assert len(results) == 1 and results[0].status == STATUS_SCORED
-    assert results[0].track_id == 0 and results[0].lane == LAYOUT3.lane_of_u(300.0)
-
-
 def test_evaluator_options_are_validated():
     with pytest.raises(ValueError):
         ShapeEvaluator(EDGE, tip_ratio=1.0)
     with pytest.raises(ValueError):
         ShapeEvaluator(EDGE, reference_margin_px=-1.0)
     with pytest.raises(ValueError):
-        ShapeScorer(EDGE, tip_ratio=0.0)
+        ShapeEvaluator(EDGE, tip_ratio=0.0)

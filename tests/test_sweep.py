@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from woody_tools import results, traces
+from woody_tools import sweep_report, traces
 from woody_tools.experiment import RUN_COLUMNS
 
 MESHES = "generated:2:7"
@@ -39,6 +39,14 @@ def test_sweep_cli_rows_report_resume(tmp_path):
     keys = {(r["mesh"], float(r["k"]), float(r["speed_fpm"]), int(r["lane"])) for r in rows}
     assert keys == {(m, k, 100.0, lane) for m in ("generated-70000", "generated-70001") for k in (0.0, 100.0)
                     for lane in range(3)}
+    _check_rows(rows)
+    _check_report(out)
+    _check_traces(out, rows, keys)
+    _check_resume(out, keys)
+
+
+def _check_rows(rows):
+    """Every lane scored, side metrics on the centre lane only, stiff fillets keep their outline."""
     for r in rows:
         assert r["status"] == "scored", r
         assert math.isfinite(float(r["phi"])) and math.isfinite(float(r["hu_term"]))
@@ -52,6 +60,9 @@ def test_sweep_cli_rows_report_resume(tmp_path):
     phi = {k: [float(r["phi"]) for r in rows if float(r["k"]) == k] for k in (0.0, 100.0)}
     assert sum(phi[0.0]) / 6 > sum(phi[100.0]) / 6
 
+
+def _check_report(out):
+    """results.md has every section and the paper's figures; the plots exist."""
     md = (out / "results.md").read_text()
     for heading in ("## Side view", "## Top view", "## Lanes", "## Targets", "## Throughput",
                     "## Classification per mesh set", "## Leave-one-out over the reference meshes"):
@@ -60,9 +71,11 @@ def test_sweep_cli_rows_report_resume(tmp_path):
         assert paper_figure in md
     assert "evaluations/min" in md
     assert "**PASS**" in md or "**MISS**" in md
-    for name in results.PLOTS:
+    for name in sweep_report.PLOTS:
         assert (out / name).stat().st_size > 1000
 
+
+def _check_traces(out, rows, keys):
     # --traces: every scored lane's window frame by frame, and one plot per mesh and speed
     trace_rows = traces.join(out)
     assert {(r["mesh"], r["k"], int(r["lane"])) for r in trace_rows} == {(m, k, lane) for m, k, _, lane in keys}
@@ -75,6 +88,8 @@ def test_sweep_cli_rows_report_resume(tmp_path):
     for mesh in ("generated-70000", "generated-70001"):
         assert (out / traces.TRACE_DIR / f"{mesh}_100fpm.png").stat().st_size > 5000
 
+
+def _check_resume(out, keys):
     # resumable: a second invocation runs nothing and leaves the rows alone
     before = (out / "runs.csv").read_text()
     second = _woody(*ARGS, "--out", str(out))
@@ -99,10 +114,10 @@ def test_sweep_cli_rows_report_resume(tmp_path):
 
 def test_threshold_and_roc_helpers():
     normal, severe = [15.0, 18.0, 20.0], [5.0, 7.0, 9.0]
-    t, bacc = results.best_threshold(normal, severe)
+    t, bacc = sweep_report.best_threshold(normal, severe)
     assert 9.0 < t < 15.0 and bacc == 1.0
-    assert results.roc(normal, severe)[2] == 1.0
-    assert results.accuracy(normal, severe, 8.0)[0] == pytest.approx(5 / 6)
+    assert sweep_report.roc(normal, severe)[2] == 1.0
+    assert sweep_report.accuracy(normal, severe, 8.0)[0] == pytest.approx(5 / 6)
 
 
 def test_runs_file_replaces_atomically(tmp_path, monkeypatch):

@@ -5,10 +5,9 @@ from __future__ import annotations
 import os
 
 import pytest
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
 from conftest import REPO, spin_until
 from msg_samples import samples, spawn_request
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 
 def test_profile_is_the_projects():

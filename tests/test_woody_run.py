@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from woody_tools.graph import entry_point, lease_domain
+from woody_tools.processes import entry_point, lease_domain
 
 
 def _bag_messages(path):

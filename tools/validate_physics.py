@@ -24,7 +24,8 @@ import time
 
 import numpy as np
 
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps
+from woody_common.line import fpm_to_mps
+from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
 from woody_sim.meshes import load_mesh_set
 
@@ -83,7 +84,8 @@ def mdm(rows: np.ndarray) -> float:
 def row(case: str, label: str, m: dict, wall: float) -> str:
     return (
         f"| {case} | {label} | {m['com_max_mm']:.1f} | {m['com_rms_mm']:.1f} | {m['bend_max_deg']:.1f} | "
-        f"{m['bend_rms_deg']:.1f} | {m['mdm_err_mm']:.2f} | {m['kink_mean_deg']:.2f} / {m['kink_max_deg']:.1f} | {wall:.1f} |"
+        f"{m['bend_rms_deg']:.1f} | {m['mdm_err_mm']:.2f} | "
+        f"{m['kink_mean_deg']:.2f} / {m['kink_max_deg']:.1f} | {wall:.1f} |"
     )
 
 

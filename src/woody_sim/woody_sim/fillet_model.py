@@ -40,7 +40,8 @@ MIN_HEIGHT = 0.0005
 class SegmentVisual:
     """One segment's piece of the fillet surface, for the renderer to pose with the physics."""
 
-    vertices: np.ndarray  # (n, 3) float32, metres, in the segment's pybullet link frame (the frame whose pose line_world reports)
+    # (n, 3) float32, metres, in the segment's pybullet link frame (the frame whose pose line_world reports)
+    vertices: np.ndarray
     faces: np.ndarray  # (m, 3) int32
 
 

@@ -24,17 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-FPM_TO_MPS = 0.3048 / 60.0
-"""Feet per minute to metres per second (100 FPM = 0.508 m/s)."""
-
-SPEED_RANGE_FPM = (1.0, 400.0)
-"""Line speeds every entry point accepts (woody run, line_sim, reject_gate), inclusive."""
-
-
-def fpm_to_mps(speed_fpm: float) -> float:
-    """Convert the user-facing line speed in feet per minute to m/s."""
-    return float(speed_fpm) * FPM_TO_MPS
-
+from woody_common.line import LANE_PITCH_M, LANES, TOP_CAMERA_HEIGHT_M, TOP_EDGE_OFFSET_M
 
 TOP_CAMERA_PRESETS: dict[str, dict[str, float | int]] = {
     "default": {},
@@ -91,8 +81,8 @@ class PinholeCamera:
 class LineGeometry:
     """Dimensions of the conveyor, lanes and cameras (metres, radians)."""
 
-    lanes: int = 3
-    lane_pitch: float = 0.16
+    lanes: int = LANES
+    lane_pitch: float = LANE_PITCH_M
     roller_radius: float = 0.0207
     """The seed system's end roller: 48 px at its side camera's 0.431 mm/px (seed-system.md, Cameras)."""
     belt_length: float = 1.4
@@ -105,8 +95,8 @@ class LineGeometry:
     remove_z: float = -0.35
     """A fillet whose every segment is below this height has fallen and is removed."""
 
-    top_height: float = 0.75
-    top_center_x: float = -0.20
+    top_height: float = TOP_CAMERA_HEIGHT_M
+    top_center_x: float = -TOP_EDGE_OFFSET_M
     top_width: int = 672
     top_height_px: int = 376
     top_hfov: float = math.radians(85.0)

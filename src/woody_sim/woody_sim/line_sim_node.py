@@ -11,28 +11,32 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import rclpy
+from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
+
+from woody_common import topics
+from woody_common.calibration import load_calibration
+from woody_common.line import LANES, SPEED_RANGE_FPM, fpm_to_mps
+from woody_common.ros_params import declare, run_node
+from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
-
-from woody_common.calibration import load_calibration
-from woody_sim.line_geometry import SPEED_RANGE_FPM, LineGeometry, fpm_to_mps, top_camera_preset
+from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
-from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.pacing import LeadLimiter
-from woody_sim.ros_params import declare, run_node
-from woody_sim.side_gate import SideFrameGate
+from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.sensor_model import sensor_preset, to_message_array
+from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
 
 WORLD_FRAME = "world"
@@ -49,12 +53,24 @@ class LineSim(Node):
 
     def __init__(self) -> None:
         super().__init__("line_sim")
-        lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
+        p = self._declare_parameters()
+        self._build_line(p)
+        self._create_interfaces(p)
+        self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
+            f"{p.lanes} lanes at {p.speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(self.meshes)} meshes, "
+            f"k from {self.k_values}, "
+            f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {p.top_rate:g} Hz, "
+            f"side {p.side_rate:g} Hz on lane {self.geometry.watched_lane}, top camera model {self.sensor.name}")
+
+    def _declare_parameters(self) -> SimpleNamespace:
+        """Declare and check every parameter; the node's own settings become attributes, the rest is returned."""
+        lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, 6)
         speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
                             "commercial line speeds).", *SPEED_RANGE_FPM)
         self.k_values = [float(k) for k in declare(self, "k_values", [0.0, 100.0],
                                                    "Stiffness values (N*m/rad) drawn per spawned fillet.")]
-        mesh_spec = declare(self, "meshes", "builtin", "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
+        mesh_spec = declare(self, "meshes", "builtin",
+                            "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
         seed = declare(self, "seed", 7, "Seed of the stiffness draw and generated meshes.", 0, 2**31 - 1)
         self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, 100000)
         self.spawn_duration = declare(self, "spawn_duration_s", 0.0, "Stop spawning after this much sim time "
@@ -92,35 +108,45 @@ class LineSim(Node):
             raise ValueError(f"k_values must be a non-empty list of finite values >= 0, got {self.k_values}")
         if side_lane >= lanes:
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
+        return SimpleNamespace(
+            lanes=lanes, speed_fpm=speed_fpm, mesh_spec=mesh_spec, seed=seed, spacing=spacing, rate=rate,
+            damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, segments=segments,
+            top_rate=top_rate, side_rate=side_rate, side_idle=side_idle, side_lane=side_lane,
+            top_camera=top_camera, max_lead=max_lead)
 
-        self.speed = fpm_to_mps(speed_fpm)
-        self.geometry = LineGeometry(lanes=lanes, side_lane=side_lane, **top_camera_preset(top_camera))
+    def _build_line(self, p: SimpleNamespace) -> None:
+        """The simulated line: geometry, physics world, mesh set, spawn schedule, frame timing, renderer."""
+        self.speed = fpm_to_mps(p.speed_fpm)
+        self.geometry = LineGeometry(lanes=p.lanes, side_lane=p.side_lane, **top_camera_preset(p.top_camera))
         self.world = LineWorld(self.geometry, PhysicsConfig(
-            n_segments=segments, damping=damping, friction_static=mu_static, friction_dynamic=mu_dynamic))
-        meshes, errors = load_mesh_set(mesh_spec)
+            n_segments=p.segments, damping=p.damping, friction_static=p.mu_static, friction_dynamic=p.mu_dynamic))
+        meshes, errors = load_mesh_set(p.mesh_spec)
         for error in errors:
             self.get_logger().error(error)
         if not meshes:
-            raise ValueError(f"mesh set '{mesh_spec}' has no loadable mesh")
+            raise ValueError(f"mesh set '{p.mesh_spec}' has no loadable mesh")
         self.meshes = {m.name: m for m in meshes}
-        interval = 60.0 / rate if rate > 0 else spacing / self.speed
-        self.schedule = SpawnSchedule(meshes=meshes, k_values=self.k_values, lanes=lanes, interval_s=interval,
-                                      seed=seed)
+        interval = 60.0 / p.rate if p.rate > 0 else p.spacing / self.speed
+        self.schedule = SpawnSchedule(meshes=meshes, k_values=self.k_values, lanes=p.lanes, interval_s=interval,
+                                      seed=p.seed)
         self.spawned = 0
-        self.top_period = 1.0 / top_rate
-        self.side_period = 1.0 / side_rate if side_rate > 0 else None
-        self.side_gate = SideFrameGate(idle_period_s=1.0 / side_idle)
+        self.top_period = 1.0 / p.top_rate
+        self.side_period = 1.0 / p.side_rate if p.side_rate > 0 else None
+        self.side_gate = SideFrameGate(idle_period_s=1.0 / p.side_idle)
         self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
 
-        latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    def _create_interfaces(self, p: SimpleNamespace) -> None:
+        """Publishers (clock, ground truth, cameras, camera poses), the spawn service and the pacing subscription."""
+        latched = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
         camera_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
-        self.truth_pub = self.create_publisher(FilletSpawn, "line/ground_truth", latched)
-        self.color_pub = self.create_publisher(Image, "top_camera/color/image_raw", camera_qos)
-        self.depth_pub = self.create_publisher(Image, "top_camera/depth/image_raw", camera_qos)
+        self.truth_pub = self.create_publisher(FilletSpawn, topics.GROUND_TRUTH, latched)
+        self.color_pub = self.create_publisher(Image, topics.TOP_COLOR_IMAGE, camera_qos)
+        self.depth_pub = self.create_publisher(Image, topics.TOP_DEPTH_IMAGE, camera_qos)
         self.color_info_pub = self.create_publisher(CameraInfo, "top_camera/color/camera_info", camera_qos)
-        self.depth_info_pub = self.create_publisher(CameraInfo, "top_camera/depth/camera_info", camera_qos)
-        self.side_pub = self.create_publisher(Image, "side_camera/image_raw", camera_qos)
+        self.depth_info_pub = self.create_publisher(CameraInfo, topics.TOP_DEPTH_INFO, camera_qos)
+        self.side_pub = self.create_publisher(Image, topics.SIDE_IMAGE, camera_qos)
         self.side_info_pub = self.create_publisher(CameraInfo, "side_camera/camera_info", camera_qos)
         self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
         self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
@@ -129,15 +155,11 @@ class LineSim(Node):
                           for name in ("top_camera", "side_camera")]
         for publisher, camera in zip(self.pose_pubs, (self.geometry.top_camera(), self.geometry.side_camera())):
             publisher.publish(_camera_pose(camera))
-        self.pacer = LeadLimiter(max_lead) if max_lead > 0 else None
+        self.pacer = LeadLimiter(p.max_lead) if p.max_lead > 0 else None
         if self.pacer is not None:
-            self.create_subscription(FilletTrackArray, "vision/tracks",
-                                     lambda m: self.pacer.ack(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9),
+            self.create_subscription(FilletTrackArray, topics.TRACKS,
+                                     lambda m: self.pacer.ack(stamp_to_seconds(m.header.stamp)),
                                      QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
-        self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
-            f"{lanes} lanes at {speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(meshes)} meshes, k from {self.k_values}, "
-            f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {top_rate:g} Hz, "
-            f"side {side_rate:g} Hz on lane {self.geometry.watched_lane}, top camera model {self.sensor.name}")
 
     # ------------------------------------------------------------------ spawning
 
@@ -181,10 +203,7 @@ class LineSim(Node):
 
     def _header(self, frame_id: str, stamp: float | None = None) -> Header:
         t = self.world.time if stamp is None else stamp
-        header = Header(frame_id=frame_id)
-        header.stamp.sec = int(t)
-        header.stamp.nanosec = int(round((t - int(t)) * 1e9)) % 1_000_000_000
-        return header
+        return Header(frame_id=frame_id, stamp=seconds_to_stamp(t))
 
     def _publish_clock(self) -> None:
         msg = Clock()

@@ -718,12 +718,12 @@ def scan_to_fillet(
 # --------------------------------------------------------------------------- mesh sets
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _builtin_reference(name: str) -> FilletMesh:
     return load_mesh(BUILTIN_DIR / f"{name}.obj")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _cached_generated(seed: int) -> FilletMesh:
     return generate_fillet(seed)
 

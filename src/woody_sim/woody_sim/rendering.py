@@ -48,9 +48,10 @@ import threading
 import time
 import traceback
 import weakref
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, NamedTuple, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -70,7 +71,6 @@ __all__ = [
     "Frames",
     "LineRenderer",
     "RenderProcess",
-    "benchmark_rendering",
     "camera_info_fields",
     "fillet_color",
     "quaternions_to_matrices",
@@ -650,7 +650,7 @@ class RenderProcess:
             self._closed = True
             self._finalizer()
 
-    def __enter__(self) -> "RenderProcess":
+    def __enter__(self) -> RenderProcess:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -855,67 +855,3 @@ def draped_poses(offsets: np.ndarray, x: float, y: float, roller_radius: float) 
     p[:, 4] = np.sin(theta / 2)
     p[:, 6] = np.cos(theta / 2)
     return p
-
-
-def _bench_poses(g: LineGeometry, offsets: list[tuple[np.ndarray, int]], phase: float) -> dict[int, np.ndarray]:
-    """Bench scene at ``phase`` in [0, 1]: fillets spread over the lanes, along the belt and over the roller."""
-    poses = {}
-    for i, (off, lane) in enumerate(offsets):
-        x = -0.45 + 0.5 * ((phase + i / len(offsets)) % 1.0)
-        y = g.lane_y(lane)
-        poses[i] = flat_poses(off, x, y) if x < -0.1 else draped_poses(off, x, y, g.roller_radius)
-    return poses
-
-
-def benchmark_rendering(
-    n_fillets: int = 3, frames: int = 100, geometry: LineGeometry | None = None, n_segments: int = 40,
-    baseline_every: int = 6,
-) -> dict:
-    """Time LineRenderer on the reference meshes (the watched lane always has a fillet in the side view)
-    and, on every ``baseline_every``-th frame, pybullet's TinyRenderer on the same scene and cameras.
-
-    Returns ms per frame {top_p50, top_p95, side_p50, side_p95, tiny_top_p50, tiny_side_p50}, the
-    speed-ups over TinyRenderer (p50 ratios) and counts.
-    """
-    from woody_sim.render_baseline import TinyRendererScene
-
-    g = geometry or LineGeometry()
-    r = LineRenderer(g)
-    tiny = TinyRendererScene()
-    tri = 0
-    offsets = []
-    for i in range(n_fillets):
-        vis, off = load_reference_visuals(i % 3, n_segments)
-        tri += sum(len(v.faces) for v in vis)
-        lane = (g.watched_lane + i) % g.lanes
-        r.add_fillet(i, lane, vis)
-        tiny.add_fillet(i, vis, fillet_color(i))
-        offsets.append((off, lane))
-    times: dict[str, list[float]] = {"top": [], "side": [], "tiny_top": [], "tiny_side": []}
-    try:
-        for k in range(frames):
-            poses = _bench_poses(g, offsets, k / max(frames - 1, 1))
-            t0 = time.perf_counter()
-            r.render_top(poses)
-            t1 = time.perf_counter()
-            r.render_side({i: p for i, p in poses.items() if offsets[i][1] == g.watched_lane})
-            times["top"].append(t1 - t0)
-            times["side"].append(time.perf_counter() - t1)
-            if k % baseline_every == 0:
-                times["tiny_top"].append(tiny.render(g.top_camera(), poses))
-                times["tiny_side"].append(tiny.render(g.side_camera(), poses))
-    finally:
-        tiny.close()
-    ms = {name: np.array(t) * 1e3 for name, t in times.items()}
-    out: dict = {"n_fillets": n_fillets, "frames": frames, "triangles": tri}
-    for name in ("top", "side"):
-        out[f"{name}_ms_p50"] = float(np.percentile(ms[name], 50))
-        out[f"{name}_ms_p95"] = float(np.percentile(ms[name], 95))
-        out[f"tiny_{name}_ms_p50"] = float(np.percentile(ms[f"tiny_{name}"], 50))
-        out[f"{name}_speedup_vs_tiny"] = out[f"tiny_{name}_ms_p50"] / out[f"{name}_ms_p50"]
-    return out
-
-
-if __name__ == "__main__":  # pragma: no cover
-    for n in (1, 3):
-        print(benchmark_rendering(n_fillets=n, frames=60))

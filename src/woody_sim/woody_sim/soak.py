@@ -25,7 +25,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps
+from woody_common.line import fpm_to_mps
+from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import FilletMesh
 
@@ -78,7 +79,8 @@ def conditions(n_meshes: int, seed: int = 0) -> Iterator[SoakCondition]:
             yield SoakCondition(*grid[i])
 
 
-def run_batch(condition: SoakCondition, mesh: FilletMesh, config: PhysicsConfig | None = None) -> tuple[int, int, float, float]:
+def run_batch(condition: SoakCondition, mesh: FilletMesh,
+              config: PhysicsConfig | None = None) -> tuple[int, int, float, float]:
     """Simulate one batch to the end; returns (passages, blow-ups, worst segment speed m/s, sim seconds)."""
     geometry = LineGeometry(lanes=condition.lanes, spawn_x=-0.15)
     geometry = replace(geometry, remove_z=-2.0 * geometry.roller_radius - FREE_FALL_MARGIN)

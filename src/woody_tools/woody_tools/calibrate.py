@@ -42,7 +42,9 @@ from woody_tools import cluster, physics_fit
 from woody_tools.experiment import RunSpec
 
 CALIBRATION_MESHES = "generated:8:9"
-"""Calibration set (generated seeds 90000-90007); the sweep's default meshes (builtin, seeds 0-2 and 10000+) are disjoint."""
+"""Calibration set (generated seeds 90000-90007).
+
+The sweep's default meshes (builtin, seeds 0-2 and 10000+) are disjoint from it."""
 TEST_MESHES = "generated:8:8"
 LOO_MESHES = "builtin"
 """--loo uses the reference (non-generated) meshes of this set."""
@@ -65,14 +67,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fit-meshes", type=int, default=2,
                         help="how many of the calibration meshes the physics fit uses (default 2)")
     parser.add_argument("--test-meshes", default=TEST_MESHES,
-                        help=f"held-out meshes for the threshold report, disjoint from --meshes (default {TEST_MESHES})")
+                        help="held-out meshes for the threshold report, disjoint from --meshes "
+                             f"(default {TEST_MESHES})")
     parser.add_argument("--masses", type=_floats, default=[10.0, 20.0, 40.0], help="total masses M (kg) to try")
     parser.add_argument("--dampings", type=_floats, default=[0.1, 0.2, 0.4], help="hinge dampers c (N m s/rad) to try")
     parser.add_argument("--frictions", type=_floats, default=[0.8], help="drive friction caps mu_static to try")
     parser.add_argument("--skip-physics", action="store_true", help="keep the current physics, choose the threshold")
     parser.add_argument("--skip-threshold", action="store_true", help="fit the physics only")
     parser.add_argument("--out", default="calibration-out", help="folder for calibration.json / calibration.md")
-    parser.add_argument("--calibration", default=None, help="calibration file to write (default config/calibration.yaml)")
+    parser.add_argument("--calibration", default=None,
+                        help="calibration file to write (default config/calibration.yaml)")
     parser.add_argument("--dry-run", action="store_true", help="print the results, do not write the calibration")
     parser.add_argument("--loo", action="store_true",
                         help="leave-one-mesh-out check of the threshold on the reference meshes (k 0/100, 100 and "
@@ -119,7 +123,7 @@ def _phi_split(rows: list[dict]) -> tuple[list[float], list[float]]:
 def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict, args: argparse.Namespace,
                      client) -> dict:
     """Φ cut on the calibration meshes, its accuracy on the held-out ones, and the top-view speed effect."""
-    from woody_tools import results
+    from woody_tools import sweep_report
 
     def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
         runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
@@ -129,9 +133,9 @@ def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict,
 
     cal_rows = rows_for(cal_names, args.meshes, "threshold (calibration set)")
     normal, severe = _phi_split(cal_rows)
-    threshold, bacc = results.best_threshold(normal, severe)
+    threshold, bacc = sweep_report.best_threshold(normal, severe)
     report = {"threshold": round(threshold, 2), "calibration_balanced_accuracy": bacc,
-              "calibration_auc": results.roc(normal, severe)[2], "calibration_n": [len(normal), len(severe)],
+              "calibration_auc": sweep_report.roc(normal, severe)[2], "calibration_n": [len(normal), len(severe)],
               "top_speed_effect": _speed_effect(cal_rows)}
     print(f"woody calibrate: Φ threshold = {report['threshold']:g} (balanced accuracy {bacc * 100:.1f} % on "
           f"{len(normal)} normal / {len(severe)} severe calibration fillets)")
@@ -150,16 +154,16 @@ def _speed_effect(rows: list[dict]) -> dict:
 
 
 def _held_out(rows: list[dict], threshold: float) -> list[dict]:
-    from woody_tools import results
+    from woody_tools import sweep_report
 
     per = []
     for speed in SPEEDS:
         for lane in (None, 0, 1, 2):
             sel = [r for r in rows if r["speed_fpm"] == speed and (lane is None or r["lane"] == lane)]
             n, s = _phi_split(sel)
-            acc, right, total = results.accuracy(n, s, threshold)
+            acc, right, total = sweep_report.accuracy(n, s, threshold)
             per.append({"speed_fpm": speed, "lane": "all" if lane is None else lane, "accuracy": acc,
-                        "right": right, "total": total, "auc": results.roc(n, s)[2]})
+                        "right": right, "total": total, "auc": sweep_report.roc(n, s)[2]})
             print(f"  held-out {speed:g} FPM lane {per[-1]['lane']}: accuracy {acc * 100:.1f} % ({right}/{total}), "
                   f"AUC {per[-1]['auc']:.3f}")
     return per
@@ -202,11 +206,12 @@ def _calibrate(args: argparse.Namespace, client) -> int:
     cal_names = list(sweep._load_meshes(args.meshes))
     test_names = list(sweep._load_meshes(args.test_meshes))
     if set(cal_names) & set(test_names):
-        print(f"woody calibrate: test meshes overlap the calibration meshes: {sorted(set(cal_names) & set(test_names))}",
-              file=sys.stderr)
+        overlap = sorted(set(cal_names) & set(test_names))
+        print(f"woody calibrate: test meshes overlap the calibration meshes: {overlap}", file=sys.stderr)
         return 2
     current = load_calibration(args.calibration)
-    physics = {k: getattr(current, k) for k in ("total_mass_kg", "hinge_damping", "friction_static", "friction_dynamic")}
+    physics = {k: getattr(current, k)
+               for k in ("total_mass_kg", "hinge_damping", "friction_static", "friction_dynamic")}
     report: dict = {"calibration_meshes": args.meshes, "test_meshes": args.test_meshes, "started": time.ctime()}
     t0 = time.perf_counter()
     if not args.skip_physics:
@@ -243,7 +248,8 @@ def _write_md(path: Path, report: dict) -> None:
              f"mu = **{physics['friction_static']:g}**; Φ threshold = **{report.get('threshold', 'n/a')}**; "
              f"wall {report.get('wall_s', 0) / 60:.1f} min.\n"]
     if "physics_fit" in report:
-        lines += ["| M (kg) | c | mu | NMDM k=0 | ΔNMDM | k=0 speed gain | objective |", "|---|---|---|---|---|---|---|"]
+        lines += ["| M (kg) | c | mu | NMDM k=0 | ΔNMDM | k=0 speed gain | objective |",
+                  "|---|---|---|---|---|---|---|"]
         lines += [f"| {p['mass']:g} | {p['damping']:g} | {p['friction_static']:g} | {p['nmdm_k0_100fpm']:.3f} | "
                   f"{p['delta_nmdm_100fpm']:.3f} | {p['nmdm_k0_speed_gain']:+.3f} | {p['objective']:.3f} |"
                   for p in report["physics_fit"]]

@@ -9,11 +9,12 @@ import sys
 SUBCOMMANDS = [
     ("run", "line_run", "run a multi-lane line: sim + vision + gate + recorder; bag, verdicts.csv, report.md"),
     ("replay", "replay", "republish a recorded bag with its original timing and /clock"),
-    ("report", "report_command", "rebuild report.md and plots from a bag or a verdicts.csv"),
+    ("report", "report", "rebuild report.md and plots from a bag or a verdicts.csv"),
     ("bag", "bag_command", "`woody bag info BAG`, `woody bag recover IN OUT` (rescue a recording cut short)"),
-    ("bench", "bench", "benchmarks: `woody bench sim`, `woody bench vision`, `woody bench graph`"),
+    ("bench", "benchmarks.command", "benchmarks: `woody bench sim`, `woody bench vision`, `woody bench graph`"),
     ("sweep", "sweep", "the paper's drop-test grid (meshes x k x speed), parallel and resumable; runs.csv, results.md"),
-    ("meshes", "meshes_command", "mesh sets: `woody meshes stats SPEC...` prints shape descriptors per mesh and per set"),
+    ("meshes", "meshes_command",
+     "mesh sets: `woody meshes stats SPEC...` prints shape descriptors per mesh and per set"),
     ("calibrate", "calibrate", "fit M, c and the drive friction to the paper's side view, choose the Φ threshold; "
                                "writes config/calibration.yaml"),
     ("soak", "soak", "physics soak: N fillet passages over the roller across k, mass, speed and lanes; blow-ups"),
@@ -23,7 +24,8 @@ SUBCOMMANDS = [
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The parser; with ``only``, just that subcommand's module is imported (pybullet stays unloaded for `report`)."""
-    parser = argparse.ArgumentParser(prog="woody", description="Woody-breast grading line: run, record, replay, report.")
+    parser = argparse.ArgumentParser(prog="woody",
+                                     description="Woody-breast grading line: run, record, replay, report.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, module_name, help_text in SUBCOMMANDS:
         command = sub.add_parser(name, help=help_text)

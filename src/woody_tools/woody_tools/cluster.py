@@ -27,12 +27,13 @@ import threading
 import time
 import uuid
 from collections import Counter
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator
 
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed
+
 from woody_sim.meshes import BUILTIN_DIR, FilletMesh, generate_fillet, load_mesh
 from woody_tools.experiment import RunSpec
 

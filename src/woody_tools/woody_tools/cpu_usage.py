@@ -8,6 +8,7 @@ adds children's times to the parent once they are reaped.
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -23,6 +24,12 @@ def _stat(pid: int) -> tuple[int, float, str] | None:
     name = text[text.index("(") + 1:text.rindex(")")]
     fields = text[text.rindex(")") + 2:].split()
     return int(fields[1]), (int(fields[11]) + int(fields[12])) / _TICK, name
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of one live process so far (its children not included); NaN once it is gone."""
+    stat = _stat(pid)
+    return stat[1] if stat is not None else math.nan
 
 
 class CpuAccounting:

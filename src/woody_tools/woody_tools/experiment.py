@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from woody_common.calibration import load_calibration
-from woody_sim.line_geometry import LineGeometry, fpm_to_mps, top_camera_preset
+from woody_common.line import fpm_to_mps
+from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
 from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer
@@ -52,7 +53,9 @@ SPAWN_X = -0.42
 
 TOP_RATE_HZ = 30.0
 TOP_START_X = -0.12
-"""Top frames start once a fillet's leading end is this close to the roller edge (m; >= 7 frames before it at 130 FPM)."""
+"""Top frames start once a fillet's leading end is this close to the roller edge.
+
+In metres; >= 7 frames before the edge at 130 FPM."""
 SIDE_RATE_HZ = 200.0
 SIDE_FAR_RATE_HZ = 20.0
 SIDE_DONE_DISTANCE = 0.12
@@ -124,35 +127,16 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     world = LineWorld(geometry, config or calibrated_config(calibration, **spec.physics_overrides()))
     speed = fpm_to_mps(spec.speed_fpm)
     mass = spec.mass if spec.mass is not None else calibration.total_mass_kg
-    results: dict[int, dict] = {}
-    side_result = None
-    n_top = n_side = 0
-    watched = geometry.watched_lane
+    top = side = None
+    n_top = 0
     try:
-        if spec.top:
-            top_cam = geometry.top_camera()
-            layout = LaneLayout(tuple(top_cam.k.reshape(-1)), geometry.top_height, spec.lanes, geometry.lane_pitch)
-            grader = FilletGrader(geometry.top_edge_row(), watched_lane=None)
-            tracker = CentroidTracker(lane_layout=layout)
-            camera, camera_rng = sensor_preset(spec.sensor), np.random.default_rng(_sensor_seed(spec))
-            background = BackgroundModel(1 if camera.ideal else BACKGROUND_FRAMES)
-            segmentation = SegmentationParams() if camera.ideal else REAL_CAMERA_SEGMENTATION
-            while not background.ready:
-                background.add(camera.depth(top_bg, camera_rng))
-        if spec.side:
-            side = SidePassageTracker(axle_px=geometry.side_axle_pixel(),
-                                      roller_radius_px=geometry.side_roller_radius_px(), background=side_bg)
-        watched_fid = None
-        for lane in range(spec.lanes):
-            fid = world.spawn(mesh, k=spec.k, lane=lane, mass=mass, speed_mps=speed)
-            renderer.add_fillet(fid, lane, world.model(fid).visuals)
-            if lane == watched:
-                watched_fid = fid
+        top = _TopView(spec, geometry, top_bg) if spec.top else None
+        watched_fid = _spawn_lanes(world, renderer, spec, mesh, mass, speed, geometry.watched_lane)
+        side = _SideView(geometry, side_bg, side_rate_hz, watched_fid) if spec.side else None
         model = world.model(watched_fid)
         lead_offset = float(model.box_centers[-1, 0] + model.box_half_extents[-1, 0])
-        top_dt, next_top, next_side = 1.0 / TOP_RATE_HZ, 0.0, 0.0
-        top_done = not spec.top
-        axle = geometry.roller_axle
+        top_dt, next_top = 1.0 / TOP_RATE_HZ, 0.0
+        top_done = top is None
         while world.time < MAX_SIM_S and world.fillets:
             now = world.step()
             for fid in world.take_removed():
@@ -162,38 +146,104 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                 next_top += top_dt * max(1, math.floor((now + 1e-9 - next_top) / top_dt) + 1)
                 if top_start_x is None or n_top or SPAWN_X + speed * now + lead_offset >= top_start_x:
                     poses = world.segment_poses()
-                    _, depth = renderer.render_top(poses)
+                    top.on_frame(renderer.render_top(poses)[1], now)
                     n_top += 1
-                    if not camera.drop(camera_rng):
-                        noisy = camera.depth(depth, camera_rng)
-                        update = tracker.update(segment_depth(noisy, background.depth, segmentation))
-                        observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen)
-                                        for t in update.active]
-                        for graded in grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
-                            results.setdefault(graded.lane, _shape_row(graded))
-                        top_done = len(results) >= spec.lanes
-            if spec.side and side_result is None and now + 1e-9 >= next_side:
-                gone = watched_fid not in world.fillets
-                near = gone or world.is_dynamic(watched_fid)
-                next_side += 1.0 / (side_rate_hz if near else SIDE_FAR_RATE_HZ)
-                if not gone and near:
-                    com = world.center_of_mass(watched_fid)
-                    gone = com[2] < axle[1] and math.hypot(com[0] - axle[0], com[2] - axle[1]) > SIDE_DONE_DISTANCE
-                frame = side_bg if gone else renderer.render_side(poses or world.segment_poses())
-                n_side += 0 if gone else 1
-                for measurement in side.update(frame, now):
-                    side_result = measurement
-            if top_done and (not spec.side or side_result is not None):
+                    top_done = len(top.results) >= spec.lanes
+            if side is not None and side.due(now):
+                side.on_step(world, renderer, poses, now)
+            if top_done and (side is None or side.result is not None):
                 break
-        if spec.side and side_result is None:  # the run ended with the passage still open: close it
-            for _ in range(side.end_frames):
-                for measurement in side.update(side_bg, world.time):
-                    side_result = measurement
+        if side is not None:
+            side.finish(world.time)
     finally:
         world.close()
         renderer.clear()
     if stats is not None:
-        stats.update(top_frames=n_top, side_frames=n_side, sim_s=world.time)
+        stats.update(top_frames=n_top, side_frames=side.frames if side is not None else 0, sim_s=world.time)
+    return _lane_rows(spec, mass, geometry.watched_lane, top.results if top is not None else {},
+                      side.result if side is not None else None)
+
+
+def _spawn_lanes(world: LineWorld, renderer, spec: RunSpec, mesh: FilletMesh, mass: float, speed: float,
+                 watched: int) -> int:
+    """One fillet per lane, all at once; returns the watched lane's fillet id."""
+    watched_fid = None
+    for lane in range(spec.lanes):
+        fid = world.spawn(mesh, k=spec.k, lane=lane, mass=mass, speed_mps=speed)
+        renderer.add_fillet(fid, lane, world.model(fid).visuals)
+        if lane == watched:
+            watched_fid = fid
+    return watched_fid
+
+
+class _TopView:
+    """The top camera of one run as the segmenter and grader see it: sensor model, segmentation, tracking, Φ."""
+
+    def __init__(self, spec: RunSpec, geometry: LineGeometry, background_depth: np.ndarray) -> None:
+        top_cam = geometry.top_camera()
+        layout = LaneLayout(tuple(top_cam.k.reshape(-1)), geometry.top_height, spec.lanes, geometry.lane_pitch)
+        self.grader = FilletGrader(geometry.top_edge_row(), watched_lane=None)
+        self.tracker = CentroidTracker(lane_layout=layout)
+        self.camera, self.rng = sensor_preset(spec.sensor), np.random.default_rng(_sensor_seed(spec))
+        self.background = BackgroundModel(1 if self.camera.ideal else BACKGROUND_FRAMES)
+        self.segmentation = SegmentationParams() if self.camera.ideal else REAL_CAMERA_SEGMENTATION
+        while not self.background.ready:
+            self.background.add(self.camera.depth(background_depth, self.rng))
+        self.results: dict[int, dict] = {}
+        """Lane -> its first graded fillet's row fields."""
+
+    def on_frame(self, depth: np.ndarray, now: float) -> None:
+        """One rendered depth frame through the sensor model (maybe dropped) and the vision path."""
+        if self.camera.drop(self.rng):
+            return
+        noisy = self.camera.depth(depth, self.rng)
+        update = self.tracker.update(segment_depth(noisy, self.background.depth, self.segmentation))
+        observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen) for t in update.active]
+        for graded in self.grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
+            self.results.setdefault(graded.lane, _shape_row(graded))
+
+
+class _SideView:
+    """The side camera on the watched lane: fast frames while its fillet is near the roller, slow ones before."""
+
+    def __init__(self, geometry: LineGeometry, background: np.ndarray, rate_hz: float, fillet_id: int) -> None:
+        self.tracker = SidePassageTracker(axle_px=geometry.side_axle_pixel(),
+                                          roller_radius_px=geometry.side_roller_radius_px(), background=background)
+        self.background, self.rate_hz, self.fillet_id = background, rate_hz, fillet_id
+        self.axle = geometry.roller_axle
+        self.next_time = 0.0
+        self.frames = 0
+        self.result = None
+
+    def due(self, now: float) -> bool:
+        return self.result is None and now + 1e-9 >= self.next_time
+
+    def on_step(self, world: LineWorld, renderer, poses, now: float) -> None:
+        """Render (or, once the fillet has fallen past the roller, reuse the empty background) and measure."""
+        gone = self.fillet_id not in world.fillets
+        near = gone or world.is_dynamic(self.fillet_id)
+        self.next_time += 1.0 / (self.rate_hz if near else SIDE_FAR_RATE_HZ)
+        if not gone and near:
+            com = world.center_of_mass(self.fillet_id)
+            ax, az = self.axle
+            gone = com[2] < az and math.hypot(com[0] - ax, com[2] - az) > SIDE_DONE_DISTANCE
+        frame = self.background if gone else renderer.render_side(poses or world.segment_poses())
+        self.frames += 0 if gone else 1
+        self._measure(frame, now)
+
+    def finish(self, now: float) -> None:
+        """The run ended with the passage still open: close it with empty frames."""
+        if self.result is None:
+            for _ in range(self.tracker.end_frames):
+                self._measure(self.background, now)
+
+    def _measure(self, frame: np.ndarray, now: float) -> None:
+        for measurement in self.tracker.update(frame, now):
+            self.result = measurement
+
+
+def _lane_rows(spec: RunSpec, mass: float, watched: int, results: dict[int, dict], side_result) -> list[dict]:
+    """One RUN_COLUMNS row per lane from the top-view results and the watched lane's side measurement."""
     rows = []
     for lane in range(spec.lanes):
         row = {"mesh": spec.mesh, "k": spec.k, "speed_fpm": spec.speed_fpm, "lane": lane, "mass": mass,

@@ -20,12 +20,15 @@ import time
 from datetime import datetime
 from pathlib import Path
 
+from woody_common import topics
 from woody_common.calibration import DEFAULT_PATH as CALIBRATION_PATH
-from woody_sim.line_geometry import SPEED_RANGE_FPM, TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
+from woody_common.line import SPEED_RANGE_FPM
+from woody_common.stamps import stamp_to_seconds
+from woody_sim.line_geometry import TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
 from woody_sim.sensor_model import PRESETS
 from woody_tools.cpu_usage import CpuAccounting
-from woody_tools.graph import DomainInUse, NodeProcess, lease_domain
-from woody_tools.report import Spawn, Verdict, build_report, join, verdict_table, write_csv
+from woody_tools.processes import DomainInUse, NodeProcess, lease_domain
+from woody_tools.run_report import Spawn, Verdict, build_report, join, verdict_table, write_csv
 from woody_vision.segmentation import REAL_CAMERA_FILTERS
 
 MAX_LEAD_S = 0.1
@@ -131,6 +134,7 @@ class LineMonitor:
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
+
         from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
 
         self.domain_id = domain_id
@@ -147,14 +151,13 @@ class LineMonitor:
         self.verdicts: list[Verdict] = []
         self.gate_commands = 0
         self.sim_time = 0.0
-        self.node.create_subscription(FilletSpawn, "line/ground_truth", self._on_spawn, latched)
-        self.node.create_subscription(FilletVerdict, "grading/verdicts", self._on_verdict, reliable)
-        self.node.create_subscription(GateCommand, "reject_gate/commands", self._on_gate, reliable)
+        self.node.create_subscription(FilletSpawn, topics.GROUND_TRUTH, self._on_spawn, latched)
+        self.node.create_subscription(FilletVerdict, topics.VERDICTS, self._on_verdict, reliable)
+        self.node.create_subscription(GateCommand, topics.GATE_COMMANDS, self._on_gate, reliable)
         self.node.create_subscription(Clock, "clock" if namespace.strip("/") else "/clock", self._on_clock, 10)
 
     def _on_spawn(self, msg) -> None:
-        self.spawns.append(Spawn(sim_id=msg.fillet_id, lane=msg.lane, mesh=msg.mesh, k=msg.stiffness, mass=msg.mass,
-                                 line_speed=msg.line_speed, stamp=_seconds(msg.header.stamp), spawn_x=msg.position.x))
+        self.spawns.append(spawn_from_msg(msg))
 
     def _on_verdict(self, msg) -> None:
         self.verdicts.append(verdict_from_msg(msg))
@@ -163,7 +166,7 @@ class LineMonitor:
         self.gate_commands += 1
 
     def _on_clock(self, msg) -> None:
-        self.sim_time = _seconds(msg.clock)
+        self.sim_time = stamp_to_seconds(msg.clock)
 
     def spin(self, seconds: float) -> None:
         deadline = time.monotonic() + seconds
@@ -178,14 +181,16 @@ class LineMonitor:
         rclpy.try_shutdown(context=self.context)
 
 
-def _seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
+def spawn_from_msg(msg) -> Spawn:
+    """Flatten a woody_msgs/FilletSpawn (the line's ground truth) into the report's Spawn."""
+    return Spawn(sim_id=msg.fillet_id, lane=msg.lane, mesh=msg.mesh, k=msg.stiffness, mass=msg.mass,
+                 line_speed=msg.line_speed, stamp=stamp_to_seconds(msg.header.stamp), spawn_x=msg.position.x)
 
 
 def verdict_from_msg(msg) -> Verdict:
     """Flatten a woody_msgs/FilletVerdict into the report's Verdict."""
     classes = {msg.CLASS_NORMAL: "normal", msg.CLASS_WOODY: "woody", msg.CLASS_UNSCORED: "unscored"}
-    return Verdict(fillet_id=msg.fillet_id, lane=msg.lane, stamp=_seconds(msg.header.stamp),
+    return Verdict(fillet_id=msg.fillet_id, lane=msg.lane, stamp=stamp_to_seconds(msg.header.stamp),
                    classification=classes.get(msg.classification, "unscored"), grade=msg.grade, phi=msg.phi,
                    hu_term=msg.hu_term, solidity_term=msg.solidity_term, nmdm=msg.nmdm, mdm=msg.mdm, be=msg.be,
                    reason=msg.unscored_reason, threshold=msg.threshold)

@@ -23,15 +23,14 @@ import io
 import json
 import os
 import re
-import struct
 import sys
 import threading
 import time
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any, Iterable, Iterator, NamedTuple
+from typing import Any, NamedTuple
 
 import mcap.writer as _mcap_writer
-from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -99,7 +98,7 @@ def _prefixes() -> list[Path]:
     return prefixes
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _msg_text(pkg: str, name: str) -> str:
     for prefix in _prefixes():
         candidate = prefix / "share" / pkg / "msg" / f"{name}.msg"
@@ -127,7 +126,7 @@ def _dependencies(pkg: str, text: str) -> list[str]:
     return sorted(deps)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def message_definition(type_name: str) -> str:
     """rosbag2's ``ros2msg`` schema text of ``type_name`` (``pkg/msg/Type`` or ``pkg/Type``)."""
     pkg, _, name = normalize_type(type_name).split("/")
@@ -149,7 +148,7 @@ def message_definition(type_name: str) -> str:
     return "\n".join(blocks)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def message_class(type_name: str) -> type:
     """The Python class of ``pkg/msg/Type``; `LookupError` (one line) when it cannot be imported."""
     try:
@@ -410,7 +409,7 @@ class BagWriter:
         finally:
             self._file.close()
 
-    def __enter__(self) -> "BagWriter":
+    def __enter__(self) -> BagWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -575,54 +574,64 @@ def bag_summary(path: str | os.PathLike) -> dict[str, Any]:
         result: dict[str, Any] = {"path": str(path), "complete": summary is not None, "topics": {},
                                   "metadata": {}, "error": None}
         if summary is not None:
-            stats = summary.statistics
-            counts = dict(stats.channel_message_counts) if stats else {}
-            for cid, channel in summary.channels.items():
-                schema = summary.schemas.get(channel.schema_id)
-                result["topics"][channel.topic] = {
-                    "type": schema.name if schema else "", "definition": _schema_text(schema),
-                    "count": counts.get(cid, 0),
-                    "qos": channel.metadata.get("offered_qos_profiles", "")}
-            result["message_count"] = stats.message_count if stats else sum(counts.values())
-            result["start_ns"] = stats.message_start_time if stats else 0
-            result["end_ns"] = stats.message_end_time if stats else 0
-            handle.seek(0)
-            for record in SeekingReader(handle).iter_metadata():
-                result["metadata"][record.name] = dict(record.metadata)
+            _summarise_complete(result, summary, handle)
         else:
-            handle.seek(0)
-            schemas: dict[int, Schema] = {}
-            channels: dict[int, str] = {}
-            count, start, end = 0, None, None
-            try:
-                for record in _stream_records(handle):
-                    if isinstance(record, Message):
-                        topic = channels.get(record.channel_id)
-                        if topic is None:
-                            continue
-                        result["topics"][topic]["count"] += 1
-                        count += 1
-                        start = record.log_time if start is None else min(start, record.log_time)
-                        end = record.log_time if end is None else max(end, record.log_time)
-                    elif isinstance(record, Schema):
-                        schemas[record.id] = record
-                    elif isinstance(record, Channel):
-                        channels[record.id] = record.topic
-                        schema = schemas.get(record.schema_id)
-                        result["topics"].setdefault(record.topic, {
-                            "type": schema.name if schema else "", "definition": _schema_text(schema), "count": 0,
-                            "qos": record.metadata.get("offered_qos_profiles", "")})
-                    elif isinstance(record, Metadata):
-                        result["metadata"][record.name] = dict(record.metadata)
-            except _Truncated:
-                result["error"] = f"{path}: truncated after {count} messages at {_seconds(start, end)}"
-            result["message_count"] = count
-            result["start_ns"] = start or 0
-            result["end_ns"] = end or 0
+            _summarise_by_scanning(result, path, handle)
         result["duration_s"] = max(0, result["end_ns"] - result["start_ns"]) / 1e9
         return result
     finally:
         handle.close()
+
+
+def _summarise_complete(result: dict[str, Any], summary, handle) -> None:
+    """Fill ``result`` from a complete file's summary section and metadata index."""
+    stats = summary.statistics
+    counts = dict(stats.channel_message_counts) if stats else {}
+    for cid, channel in summary.channels.items():
+        schema = summary.schemas.get(channel.schema_id)
+        result["topics"][channel.topic] = {
+            "type": schema.name if schema else "", "definition": _schema_text(schema),
+            "count": counts.get(cid, 0),
+            "qos": channel.metadata.get("offered_qos_profiles", "")}
+    result["message_count"] = stats.message_count if stats else sum(counts.values())
+    result["start_ns"] = stats.message_start_time if stats else 0
+    result["end_ns"] = stats.message_end_time if stats else 0
+    handle.seek(0)
+    for record in SeekingReader(handle).iter_metadata():
+        result["metadata"][record.name] = dict(record.metadata)
+
+
+def _summarise_by_scanning(result: dict[str, Any], path, handle) -> None:
+    """Fill ``result`` by reading an incomplete file record by record up to where it ends."""
+    handle.seek(0)
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, str] = {}
+    count, start, end = 0, None, None
+    try:
+        for record in _stream_records(handle):
+            if isinstance(record, Message):
+                topic = channels.get(record.channel_id)
+                if topic is None:
+                    continue
+                result["topics"][topic]["count"] += 1
+                count += 1
+                start = record.log_time if start is None else min(start, record.log_time)
+                end = record.log_time if end is None else max(end, record.log_time)
+            elif isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record.topic
+                schema = schemas.get(record.schema_id)
+                result["topics"].setdefault(record.topic, {
+                    "type": schema.name if schema else "", "definition": _schema_text(schema), "count": 0,
+                    "qos": record.metadata.get("offered_qos_profiles", "")})
+            elif isinstance(record, Metadata):
+                result["metadata"][record.name] = dict(record.metadata)
+    except _Truncated:
+        result["error"] = f"{path}: truncated after {count} messages at {_seconds(start, end)}"
+    result["message_count"] = count
+    result["start_ns"] = start or 0
+    result["end_ns"] = end or 0
 
 
 def _schema_text(schema: Schema | None) -> str:

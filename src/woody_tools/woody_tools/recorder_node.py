@@ -53,28 +53,25 @@ from __future__ import annotations
 
 import collections
 import re
-import signal
 import sys
 import threading
 import time
 
 import rclpy
-from rclpy.clock import Clock, ClockType
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.exceptions import InvalidParameterTypeException, ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 
-from woody_sim.ros_params import check_overrides, init_checked, non_ros_args, usage
+from woody_common.ros_params import check_overrides, run_node, usage
 from woody_tools.mcap_io import BagError, BagWriter, message_class, message_definition, qos_profiles_yaml
 
 DEFAULT_EXCLUDE = r"^/(rosout|parameter_events)$|/_"
 
 
-class ConfigError(Exception):
+class ConfigError(ValueError):
     """A parameter the recorder cannot work with; the message is one line."""
 
 
@@ -87,11 +84,8 @@ class Recorder(Node):
 
     def __init__(self) -> None:
         super().__init__("recorder")
-        try:
-            self._declare()
-            check_overrides(self)
-        except (ParameterException, InvalidParameterTypeException, ValueError) as exc:
-            raise ConfigError(f"bad parameter: {exc}") from None
+        self._declare()
+        check_overrides(self)  # before the bag is opened; run_node turns the ValueError into one line
         p = self.get_parameter
         output = p("output").value or f"bags/{time.strftime('%Y%m%d-%H%M%S')}.mcap"
         topics = self.get_parameter_or("topics", Parameter("topics", Parameter.Type.STRING_ARRAY, [])).value
@@ -147,7 +141,7 @@ class Recorder(Node):
         def desc(text: str, kind: int, **kw) -> ParameterDescriptor:
             return ParameterDescriptor(description=text, type=kind, read_only=True, **kw)
 
-        S, D, I, SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_DOUBLE,
+        S, D, INT, SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_DOUBLE,
                        ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_STRING_ARRAY)
         self.declare_parameter("output", "", desc("path of the .mcap (default bags/<timestamp>.mcap)", S))
         self.declare_parameter("topics", Parameter.Type.STRING_ARRAY,
@@ -155,13 +149,13 @@ class Recorder(Node):
         self.declare_parameter("topic_regex", "", desc("also record topics matching this regex", S))
         self.declare_parameter("exclude_regex", DEFAULT_EXCLUDE, desc("never record topics matching this", S))
         self.declare_parameter("discovery_period", 0.5, desc("seconds between searches for new topics", D))
-        self.declare_parameter("queue_depth", 100, desc("keep-last depth of each subscription", I))
+        self.declare_parameter("queue_depth", 100, desc("keep-last depth of each subscription", INT))
         self.declare_parameter("compression", "zstd", desc("chunk compression: zstd, lz4 or none", S))
-        self.declare_parameter("compression_level", 1, desc("zstd level (1 keeps up with 200 Hz images)", I))
-        self.declare_parameter("chunk_size", 4 * 1024 * 1024, desc("bytes per MCAP chunk", I))
+        self.declare_parameter("compression_level", 1, desc("zstd level (1 keeps up with 200 Hz images)", INT))
+        self.declare_parameter("chunk_size", 4 * 1024 * 1024, desc("bytes per MCAP chunk", INT))
         self.declare_parameter("flush_period", 1.0, desc("max seconds a message waits before its chunk is "
                                                          "written (what a SIGKILL can lose)", D))
-        self.declare_parameter("max_buffer_mb", 512, desc("received but unwritten data held in memory", I))
+        self.declare_parameter("max_buffer_mb", 512, desc("received but unwritten data held in memory", INT))
         self.declare_parameter("run_settings", "", desc("JSON object of the recorded run's settings, kept in the "
                                                         "bag's woody metadata record (woody report rebuilds its "
                                                         "settings table from it)", S))
@@ -247,7 +241,8 @@ class Recorder(Node):
         sub_qos = self._subscriptions_by_topic[topic].qos_profile
         for pub in self.get_publishers_info_by_topic(topic):
             offered = pub.qos_profile
-            if ((sub_qos.reliability == ReliabilityPolicy.RELIABLE and offered.reliability != ReliabilityPolicy.RELIABLE)
+            if ((sub_qos.reliability == ReliabilityPolicy.RELIABLE
+                 and offered.reliability != ReliabilityPolicy.RELIABLE)
                     or (sub_qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
                         and offered.durability != DurabilityPolicy.TRANSIENT_LOCAL)):
                 self.get_logger().warning(
@@ -294,6 +289,22 @@ class Recorder(Node):
             self._error = exc
             with self._cond:
                 self._cond.notify_all()
+
+    def spin(self, stop: threading.Event) -> int:
+        """Record until ``stop`` is set, then take what the middleware still holds; 1 if writing failed."""
+        executor = SingleThreadedExecutor(context=self.context)
+        executor.add_node(self)
+        try:
+            while not stop.is_set() and rclpy.ok():
+                executor.spin_once(timeout_sec=0.1)
+            self.drain(executor)
+        except _Failure:
+            return 1
+        except ExternalShutdownException:
+            pass
+        finally:
+            executor.remove_node(self)
+        return 0
 
     def drain(self, executor, quiet_s: float = 0.3, limit_s: float = 5.0) -> None:
         """Take what the middleware still holds for us before closing: a recorder lagging behind a busy
@@ -358,40 +369,8 @@ def _drop_text(written: int, published: int | None) -> str:
 
 def main(args: list[str] | None = None) -> int:
     """Record until SIGINT/SIGTERM, then finish the bag. Exit code 0, 2 on bad parameters, 1 on write errors."""
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    # rclpy's own handlers would shut the context down before the bag is finished
-    # (and could interrupt finishing with KeyboardInterrupt); ours only set `stop`.
-    code = init_checked("recorder", args, signal_handler_options=SignalHandlerOptions.NO)
-    if code is not None:
-        return code
-    if non_ros_args(args):  # --help
-        print(usage("recorder").splitlines()[0] + "\n" + __doc__.split("\n\n", 1)[1].split("\n\nTiming")[0])
-        rclpy.try_shutdown()
-        return 0
-    node: Recorder | None = None
-    code = 0
-    try:
-        node = Recorder()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-        node.drain(executor)
-    except ConfigError as exc:
-        rclpy.logging.get_logger("recorder").error(str(exc))
-        code = 2
-    except _Failure:
-        code = 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            code = node.close() or code
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    help_text = usage("recorder").splitlines()[0] + "\n" + __doc__.split("\n\n", 1)[1].split("\n\nTiming")[0]
+    return run_node("recorder", Recorder, args, help_text=help_text)
 
 
 if __name__ == "__main__":

@@ -44,8 +44,8 @@ import threading
 import time
 from typing import Any
 
-from woody_tools.mcap_io import (BagError, bag_summary, message_class, message_definition, parse_qos_profiles,
-                                 read_bag)
+from woody_common.stamps import nanoseconds_to_stamp
+from woody_tools.mcap_io import BagError, bag_summary, message_class, message_definition, parse_qos_profiles, read_bag
 
 CLOCK = "/clock"
 
@@ -128,26 +128,10 @@ def run(args: argparse.Namespace) -> int:
     if not in_bag or not info["message_count"]:
         return _fail(info["error"] or f"{path}: the bag holds no messages")
 
-    requested = None if not args.topics else [t if t.startswith("/") else "/" + t for t in args.topics]
-    if requested is not None:
-        missing = [t for t in requested if t not in in_bag]
-        if len(missing) == len(requested):
-            return _fail(f"{path}: holds none of {' '.join(requested)} (it has {' '.join(sorted(in_bag))})")
-        if missing:
-            print(f"replay: {path}: not in the bag, skipped: {' '.join(missing)}", file=sys.stderr)
-    excluded = {t if t.startswith("/") else "/" + t for t in args.exclude}
-    selected = [t for t in (requested or sorted(in_bag)) if t in in_bag and t != CLOCK and t not in excluded]
-    types: dict[str, type] = {}
-    for topic in selected:
-        try:
-            types[topic] = message_class(in_bag[topic]["type"])
-        except LookupError as exc:
-            print(f"replay: skipping {topic}: {exc}", file=sys.stderr)
-            continue
-        if _outdated(in_bag[topic]):
-            del types[topic]
-            print(f"replay: skipping {topic}: recorded with an older {in_bag[topic]['type']} definition than this "
-                  "workspace's woody_msgs (replay the camera topics into the vision nodes instead)", file=sys.stderr)
+    try:
+        types = _playable_types(args, path, in_bag)
+    except ValueError as exc:
+        return _fail(str(exc))
     clock_mode = None if args.no_clock else ("recorded" if CLOCK in in_bag else "synthesised")
     if not types and clock_mode != "recorded":
         return _fail(f"{path}: nothing playable in the selected topics")
@@ -184,6 +168,32 @@ def run(args: argparse.Namespace) -> int:
         rclpy.try_shutdown(context=context)
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def _playable_types(args: argparse.Namespace, path, in_bag: dict[str, dict]) -> dict[str, type]:
+    """Topic -> message class of the selected topics this workspace can publish (a line on stderr per skipped one);
+    ValueError when the bag holds none of the requested topics."""
+    requested = None if not args.topics else [t if t.startswith("/") else "/" + t for t in args.topics]
+    if requested is not None:
+        missing = [t for t in requested if t not in in_bag]
+        if len(missing) == len(requested):
+            raise ValueError(f"{path}: holds none of {' '.join(requested)} (it has {' '.join(sorted(in_bag))})")
+        if missing:
+            print(f"replay: {path}: not in the bag, skipped: {' '.join(missing)}", file=sys.stderr)
+    excluded = {t if t.startswith("/") else "/" + t for t in args.exclude}
+    selected = [t for t in (requested or sorted(in_bag)) if t in in_bag and t != CLOCK and t not in excluded]
+    types: dict[str, type] = {}
+    for topic in selected:
+        try:
+            types[topic] = message_class(in_bag[topic]["type"])
+        except LookupError as exc:
+            print(f"replay: skipping {topic}: {exc}", file=sys.stderr)
+            continue
+        if _outdated(in_bag[topic]):
+            del types[topic]
+            print(f"replay: skipping {topic}: recorded with an older {in_bag[topic]['type']} definition than this "
+                  "workspace's woody_msgs (replay the camera topics into the vision nodes instead)", file=sys.stderr)
+    return types
 
 
 def _skip_live(node, args, types: dict[str, type], clock_mode: str | None, stop: _Stop) -> str | None:
@@ -275,7 +285,7 @@ class _Player:
         if bag_ns <= self._last_clock:
             return
         self._last_clock = bag_ns
-        self._clock_msg.clock.sec, self._clock_msg.clock.nanosec = divmod(bag_ns, 1_000_000_000)
+        self._clock_msg.clock = nanoseconds_to_stamp(bag_ns)
         self.clock_publisher.publish(self._clock_msg)
 
     def _wait_until(self, target: float, t0_wall: float, t0_bag: int, next_bag: int) -> None:

@@ -62,7 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--k", type=_floats, default=list(DEFAULT_K),
                         help="hinge stiffnesses, comma-separated (default: union of the paper's top-down "
                              "0..100 and side-view 0,10,100,200,400)")
-    parser.add_argument("--speeds", type=_floats, default=list(DEFAULT_SPEEDS), help="line speeds in FPM (default 100,130)")
+    parser.add_argument("--speeds", type=_floats, default=list(DEFAULT_SPEEDS),
+                        help="line speeds in FPM (default 100,130)")
     parser.add_argument("--lanes", type=int, default=3, help="identical fillets side by side per run (default 3)")
     parser.add_argument("--out", default="sweep-out", help="output folder (runs.csv, results.md, *.png)")
     parser.add_argument("--mass", type=float, default=None,
@@ -227,9 +228,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     meta = _update_meta(out / META_FILE, failed, args, len(names), mass)
     if not args.no_report:
-        from woody_tools import results
+        from woody_tools import sweep_report
 
-        md = results.build(out, meta, docs=Path(args.docs) if args.docs else None)
+        md = sweep_report.build(out, meta, docs=Path(args.docs) if args.docs else None)
         print(f"woody sweep: wrote {md}", file=sys.stderr)
     if args.traces:
         _report_traces(out)

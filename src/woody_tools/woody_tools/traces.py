@@ -14,8 +14,8 @@ from __future__ import annotations
 import csv
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 TRACE_DIR = "traces"
 TRACE_CSV = "traces.csv"

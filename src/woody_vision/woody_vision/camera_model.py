@@ -9,8 +9,8 @@ nodes, the experiment runner and the tests agree on the same numbers.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

@@ -12,6 +12,8 @@ import time
 
 import numpy as np
 
+from woody_common.stamps import stamp_to_seconds
+
 ENCODINGS = {"rgb8": (np.uint8, 3), "bgr8": (np.uint8, 3), "mono8": (np.uint8, 1), "32FC1": (np.float32, 1),
              "16UC1": (np.uint16, 1)}
 """REP 118 encodings the project reads, with their dtype and channel count."""
@@ -70,7 +72,7 @@ class FrameChecker:
     def check(self, msg, shape: tuple[int, ...]) -> None:
         """Raise FrameError for an out-of-order or resized frame; set ``restarted`` on a stream restart."""
         self.restarted = False
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        stamp = stamp_to_seconds(msg.header.stamp)
         if self._shape is not None and shape != self._shape:
             if shape != self._new_shape:
                 self._new_shape, self._new_shape_count = shape, 0

@@ -13,8 +13,8 @@ sim time, so each fillet still gets exactly one verdict.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -85,7 +85,8 @@ class FilletGrader:
         self._side: list[SideMeasurement] = []
         self.now = -math.inf
 
-    def on_tracks(self, stamp: float, tracks: Sequence[TrackObservation], ended_ids: Iterable[int] = ()) -> list[GradedFillet]:
+    def on_tracks(self, stamp: float, tracks: Sequence[TrackObservation],
+                  ended_ids: Iterable[int] = ()) -> list[GradedFillet]:
         """Feed one top-down frame; returns the verdicts decided now (held watched-lane ones come later)."""
         self.now = max(self.now, stamp)
         decided: list[GradedFillet] = []

@@ -14,23 +14,32 @@ import sys
 
 import cv2
 import numpy as np
-from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from geometry_msgs.msg import Point
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import ImageMarker
-from woody_msgs.msg import FilletTrackArray, FilletVerdict
 
-from woody_sim.ros_params import declare, run_node
+from woody_common import topics
 from woody_common.calibration import load_calibration
+from woody_common.line import (
+    LANES,
+    SIDE_AXLE_PX,
+    SIDE_ROLLER_RADIUS_PX,
+    TOP_CAMERA_HEIGHT_M,
+    TOP_EDGE_OFFSET_M,
+)
+from woody_common.ros_params import declare, run_node
+from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
+from woody_msgs.msg import FilletTrackArray, FilletVerdict
 from woody_vision.camera_model import edge_row
 from woody_vision.frame_checks import FrameChecker, FrameError
+from woody_vision.grader_core import DEFAULT_SIDE_WAIT_S, FilletGrader, GradedFillet, TrackObservation
+from woody_vision.grading import GradingRules
 from woody_vision.image_encodings import color_rgb
 from woody_vision.image_qos import declare_image_qos
-from woody_vision.grader_core import FilletGrader, GradedFillet, TrackObservation
-from woody_vision.grading import GradingRules
+from woody_vision.shape_score import TIP_WIDTH_RATIO, W1, W2
 from woody_vision.side_view import SidePassageTracker
 
 MARKER_COLOURS = {"pending": ColorRGBA(r=1.0, g=0.85, b=0.0, a=1.0), "normal": ColorRGBA(g=0.8, a=1.0),
@@ -38,7 +47,8 @@ MARKER_COLOURS = {"pending": ColorRGBA(r=1.0, g=0.85, b=0.0, a=1.0), "normal": C
 """Contour colours on the image: yellow until graded, then green normal, red woody, grey unscored."""
 MARKER_LIFETIME_NS = 200_000_000
 """A marker outlives its frame by a few frames, so a viewer never flickers, and vanishes with the fillet."""
-LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY, "unscored": FilletVerdict.CLASS_UNSCORED}
+LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY,
+          "unscored": FilletVerdict.CLASS_UNSCORED}
 
 
 class Grader(Node):
@@ -46,30 +56,36 @@ class Grader(Node):
 
     def __init__(self) -> None:
         super().__init__("grader")
-        threshold = declare(self, "threshold", load_calibration().phi_threshold, "Φ below this is woody (stiff fillets deform "
-                            "less); the default is the calibrated one.", 0.001, 1000.0)
+        threshold = declare(self, "threshold", load_calibration().phi_threshold,
+                            "Φ below this is woody (stiff fillets deform less); the default is the calibrated one.",
+                            0.001, 1000.0)
         moderate = declare(self, "moderate_threshold", 0.0, "Φ below this grades at least moderate (0 = threshold).",
                            0.0, 1000.0)
         severe = declare(self, "severe_threshold", 0.0, "Φ below this grades severe (0 = no grades).", 0.0, 1000.0)
         self.rules = GradingRules(threshold, moderate or None, severe or None)
-        self.camera_height = declare(self, "camera_height_m", 0.75, "Top camera height above the belt (m).", 0.05, 10.0)
-        self.edge_offset = declare(self, "roller_edge_offset_m", 0.20, "Distance from the top camera's optical axis "
-                                   "to the roller edge along the flow (m).", -5.0, 5.0)
+        self.camera_height = declare(self, "camera_height_m", TOP_CAMERA_HEIGHT_M,
+                                     "Top camera height above the belt (m).", 0.05, 10.0)
+        self.edge_offset = declare(self, "roller_edge_offset_m", TOP_EDGE_OFFSET_M,
+                                   "Distance from the top camera's optical axis to the roller edge along the flow (m).",
+                                   -5.0, 5.0)
         self.evaluator_options = dict(
-            w1=declare(self, "w1", 100.0, "Weight of the Hu-moment term of Φ.", 0.0, 1e6),
-            w2=declare(self, "w2", 100.0, "Weight of the solidity term of Φ.", 0.0, 1e6),
-            tip_ratio=declare(self, "tip_ratio", 0.30, "The reference's narrow leading end is cut up to the first "
-                              "line at least this fraction of the maximum body width.", 0.01, 0.99),
+            w1=declare(self, "w1", W1, "Weight of the Hu-moment term of Φ.", 0.0, 1e6),
+            w2=declare(self, "w2", W2, "Weight of the solidity term of Φ.", 0.0, 1e6),
+            tip_ratio=declare(self, "tip_ratio", TIP_WIDTH_RATIO, "The reference's narrow leading end is cut up to the "
+                              "first line at least this fraction of the maximum body width.", 0.01, 0.99),
         )
-        lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
+        lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, 6)
         side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
         self.side_enabled = declare(self, "use_side_view", True, "Measure NMDM/MDM/BE on the watched lane.")
-        self.side_wait = declare(self, "side_wait_s", 0.8, "Longest a watched-lane verdict waits for its side-view "
-                                 "measurement (s).", 0.0, 10.0)
+        self.side_wait = declare(self, "side_wait_s", DEFAULT_SIDE_WAIT_S,
+                                 "Longest a watched-lane verdict waits for its side-view measurement (s).", 0.0, 10.0)
         self.side_options = dict(
-            axle_px=(declare(self, "roller_axle_u", 480.0, "Roller axle column in the side image (px).", -1e4, 1e4),
-                     declare(self, "roller_axle_v", 348.0, "Roller axle row in the side image (px).", -1e4, 1e4)),
-            roller_radius_px=declare(self, "roller_radius_px", 48.0, "Roller radius in the side image (px).", 1.0, 1e4),
+            axle_px=(declare(self, "roller_axle_u", SIDE_AXLE_PX[0], "Roller axle column in the side image (px).",
+                             -1e4, 1e4),
+                     declare(self, "roller_axle_v", SIDE_AXLE_PX[1], "Roller axle row in the side image (px).",
+                             -1e4, 1e4)),
+            roller_radius_px=declare(self, "roller_radius_px", SIDE_ROLLER_RADIUS_PX,
+                                     "Roller radius in the side image (px).", 1.0, 1e4),
         )
         if side_lane >= lanes:
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
@@ -84,12 +100,12 @@ class Grader(Node):
 
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         sensor = declare_image_qos(self)
-        self.verdict_pub = self.create_publisher(FilletVerdict, "grading/verdicts", reliable)
+        self.verdict_pub = self.create_publisher(FilletVerdict, topics.VERDICTS, reliable)
         self.marker_pub = self.create_publisher(ImageMarker, "grading/markers", 50) if markers else None
-        self.create_subscription(CameraInfo, "top_camera/depth/camera_info", self.on_camera_info, sensor)
-        self.create_subscription(FilletTrackArray, "vision/tracks", self.on_tracks, QoSProfile(depth=50))
+        self.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self.on_camera_info, sensor)
+        self.create_subscription(FilletTrackArray, topics.TRACKS, self.on_tracks, QoSProfile(depth=50))
         if self.side is not None:
-            self.create_subscription(Image, "side_camera/image_raw", self.on_side_image, sensor)
+            self.create_subscription(Image, topics.SIDE_IMAGE, self.on_side_image, sensor)
         self.create_timer(0.1, self.on_timer)
         self.frame_id = ""
 
@@ -112,7 +128,7 @@ class Grader(Node):
             self.side_checker.reject(f"tracks {odd}: contour_uv of odd length (u, v pairs expected); those skipped")
         tracks = [TrackObservation(t.id, t.lane, np.frombuffer(t.contour_uv, np.int32).reshape(-1, 2), t.unseen)
                   for t in msg.tracks if len(t.contour_uv) >= 6 and len(t.contour_uv) % 2 == 0]
-        self._publish(self.core.on_tracks(_seconds(msg.header.stamp), tracks, msg.ended_ids))
+        self._publish(self.core.on_tracks(stamp_to_seconds(msg.header.stamp), tracks, msg.ended_ids))
         if self.marker_pub is not None:
             for track in tracks:
                 self.marker_pub.publish(self._marker(msg.header, track))
@@ -126,7 +142,7 @@ class Grader(Node):
             return
         if self.side_checker.restarted:
             self.side.reset()
-        for measurement in self.side.update(rgb, _seconds(msg.header.stamp)):
+        for measurement in self.side.update(rgb, stamp_to_seconds(msg.header.stamp)):
             if self.core is not None:
                 self._publish(self.core.on_side(measurement))
 
@@ -164,23 +180,14 @@ class Grader(Node):
             if self.rules.severe_threshold else nan, severe_threshold=self.rules.severe_threshold or nan,
             frames_in_window=shape.frames, side_measured=side is not None,
             nmdm=side.nmdm if side else nan, mdm=side.mdm_min_px if side else nan, be=side.be if side else nan)
-        msg.header.stamp = _time(shape.stamp if shape.stamp is not None else self.core.now)
+        msg.header.stamp = seconds_to_stamp(shape.stamp if shape.stamp is not None else self.core.now)
         msg.header.frame_id = self.frame_id
         if shape.reference_stamp is not None:
-            msg.reference_stamp = _time(shape.reference_stamp)
+            msg.reference_stamp = seconds_to_stamp(shape.reference_stamp)
         return msg
 
     def close(self) -> None:
         print(f"[grader] published {self.published} verdicts", flush=True)
-
-
-def _seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def _time(seconds: float) -> Time:
-    sec = int(math.floor(seconds))
-    return Time(sec=sec, nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
 
 
 def _finite_or_nan(value: float) -> float:

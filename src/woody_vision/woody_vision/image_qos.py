@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from woody_sim.ros_params import declare
+from woody_common.ros_params import declare
 
 CHOICES = {"sensor_data": ReliabilityPolicy.BEST_EFFORT, "reliable": ReliabilityPolicy.RELIABLE}
 

@@ -11,15 +11,15 @@ from __future__ import annotations
 
 import sys
 
-from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from woody_common import topics
+from woody_common.line import FPM_TO_MPS, LANES, SPEED_RANGE_FPM
+from woody_common.ros_params import declare, run_node
+from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletVerdict, GateCommand
-
-from woody_sim.line_geometry import FPM_TO_MPS, SPEED_RANGE_FPM
-from woody_sim.ros_params import declare, run_node
 from woody_vision.gate_timing import GateTiming
-
 
 
 class RejectGate(Node):
@@ -29,7 +29,7 @@ class RejectGate(Node):
         super().__init__("reject_gate")
         speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
                             "commercial speeds).", *SPEED_RANGE_FPM)
-        lanes = declare(self, "lanes", 3, "Number of lanes, each with its own diverter.", 1, 6)
+        lanes = declare(self, "lanes", LANES, "Number of lanes, each with its own diverter.", 1, 6)
         distances = list(declare(self, "gate_distance_m", [0.6], "Distance from the roller edge to each lane's "
                                  "diverter (m): one value for all lanes or one per lane."))
         open_duration = declare(self, "open_duration_s", 0.3, "How long a diverter stays open (s).", 0.01, 5.0)
@@ -44,8 +44,8 @@ class RejectGate(Node):
         self.late = 0
         self.passed = 0
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        self.publisher = self.create_publisher(GateCommand, "reject_gate/commands", reliable)
-        self.create_subscription(FilletVerdict, "grading/verdicts", self.on_verdict, reliable)
+        self.publisher = self.create_publisher(GateCommand, topics.GATE_COMMANDS, reliable)
+        self.create_subscription(FilletVerdict, topics.VERDICTS, self.on_verdict, reliable)
 
     def close(self) -> None:
         print(f"[reject_gate] diverted {self.diverted}, late {self.late}, passed {self.passed}", flush=True)
@@ -57,7 +57,7 @@ class RejectGate(Node):
             self.passed += 1
             return
         now = self.get_clock().now().nanoseconds * 1e-9
-        crossing = verdict.header.stamp.sec + verdict.header.stamp.nanosec * 1e-9
+        crossing = stamp_to_seconds(verdict.header.stamp)
         try:
             actuation = self.timing.actuation_time(verdict.lane, crossing)
         except ValueError as exc:
@@ -70,18 +70,13 @@ class RejectGate(Node):
                 f"already passed at {now:.3f} s ({self.late} late so far); not diverted")
             return
         command = GateCommand(lane=verdict.lane, fillet_id=verdict.fillet_id, open_duration=self.timing.open_duration_s,
-                              phi=verdict.phi, actuation_time=_stamp(actuation))
+                              phi=verdict.phi, actuation_time=seconds_to_stamp(actuation))
         command.header.stamp = self.get_clock().now().to_msg()
         command.header.frame_id = verdict.header.frame_id
         self.publisher.publish(command)
         self.diverted += 1
         self.get_logger().info(f"divert fillet {verdict.fillet_id} lane {verdict.lane} at {actuation:.3f} s "
                                f"(phi {verdict.phi:.2f}); {self.diverted} diverted")
-
-
-def _stamp(seconds: float) -> Time:
-    sec = int(seconds)
-    return Time(sec=sec, nanosec=int(round((seconds - sec) * 1e9)))
 
 
 def main(args: list[str] | None = None) -> None:

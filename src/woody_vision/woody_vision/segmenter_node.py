@@ -17,9 +17,11 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Empty
-from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 
-from woody_sim.ros_params import declare, run_node
+from woody_common import topics
+from woody_common.line import LANE_PITCH_M, LANES, TOP_CAMERA_HEIGHT_M
+from woody_common.ros_params import declare, run_node
+from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 from woody_vision.camera_model import LaneLayout
 from woody_vision.frame_checks import FrameChecker, FrameError
 from woody_vision.image_encodings import color_rgb, depth_metres, match_size
@@ -44,10 +46,11 @@ class Segmenter(Node):
             blur_px=declare(self, "blur_px", 0.0, "Gaussian sigma smoothing the height map after the median (px; 0 = "
                             "off; 1.0 for a real camera).", 0.0, 20.0),
         )
-        self.lanes = declare(self, "lanes", 3, "Lanes across the belt.", 1, 6)
-        self.lane_pitch = declare(self, "lane_pitch_m", 0.16, "Distance between lane centres (m).", 0.01, 2.0)
-        self.camera_height = declare(self, "camera_height_m", 0.75, "Top camera height above the belt (m), part of "
-                                     "its extrinsic calibration.", 0.05, 10.0)
+        self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, 6)
+        self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Distance between lane centres (m).", 0.01, 2.0)
+        self.camera_height = declare(self, "camera_height_m", TOP_CAMERA_HEIGHT_M,
+                                     "Top camera height above the belt (m), part of its extrinsic calibration.",
+                                     0.05, 10.0)
         max_unseen = declare(self, "max_unseen_frames", 15, "A track ends after this many frames unseen.", 1, 1000)
         max_distance = declare(self, "max_distance_px", 40.0, "Largest centroid jump matched frame to frame (px).",
                                1.0, 1000.0)
@@ -63,15 +66,15 @@ class Segmenter(Node):
         self.info_size: tuple[int, int] | None = None
 
         sensor = declare_image_qos(self)
-        self.tracks_pub = self.create_publisher(FilletTrackArray, "vision/tracks", QoSProfile(depth=50))
+        self.tracks_pub = self.create_publisher(FilletTrackArray, topics.TRACKS, QoSProfile(depth=50))
         self.frames = 0
         self.debug_pub = self.create_publisher(Image, "vision/debug_image", 5) if self.publish_debug else None
-        self.create_subscription(CameraInfo, "top_camera/depth/camera_info", self.on_camera_info, sensor)
-        self.create_subscription(Image, "top_camera/depth/image_raw", self.on_depth, sensor)
+        self.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self.on_camera_info, sensor)
+        self.create_subscription(Image, topics.TOP_DEPTH_IMAGE, self.on_depth, sensor)
         self.create_subscription(Empty, "~/reset_background", self.on_reset, 1)
         if self.publish_debug:
-            self.create_subscription(Image, "top_camera/color/image_raw", self.on_color, sensor)
-            self.create_subscription(FilletVerdict, "grading/verdicts", self.on_verdict, 50)
+            self.create_subscription(Image, topics.TOP_COLOR_IMAGE, self.on_color, sensor)
+            self.create_subscription(FilletVerdict, topics.VERDICTS, self.on_verdict, 50)
 
     def on_camera_info(self, info: CameraInfo) -> None:
         if self.tracker is None and info.k[0] > 0:
@@ -153,7 +156,8 @@ class Segmenter(Node):
         for track in tracks:
             colour = (0, 255, 0) if track.unseen == 0 else (255, 160, 0)
             cv2.polylines(canvas, [track.blob.contour.reshape(-1, 1, 2)], True, colour, 1)
-            label = f"{track.track_id} L{track.lane}" + (f" {self.scores[track.track_id]}" if track.track_id in self.scores else "")
+            score = self.scores.get(track.track_id)
+            label = f"{track.track_id} L{track.lane}" + (f" {score}" if score is not None else "")
             u, v = (int(c) for c in track.blob.centroid)
             cv2.putText(canvas, label, (u - 20, v), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1)
         out = Image(header=depth_msg.header, height=canvas.shape[0], width=canvas.shape[1], encoding="rgb8",

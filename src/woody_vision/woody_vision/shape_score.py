@@ -38,13 +38,11 @@ started at or past the edge, or the track ended before the window closed).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from enum import Enum
 
 import cv2
 import numpy as np
-
-from woody_vision.tracking import TrackUpdate
 
 W1 = 100.0
 """Weight of the Hu-moment term (paper)."""
@@ -296,36 +294,3 @@ class ShapeEvaluator:
 def _nanmax(values: list[float]) -> float:
     finite = [v for v in values if math.isfinite(v)]
     return max(finite) if finite else math.nan
-
-
-class ShapeScorer:
-    """Runs one :class:`ShapeEvaluator` per track of a :class:`~woody_vision.tracking.CentroidTracker`."""
-
-    def __init__(self, edge_row: float, **evaluator_options: float) -> None:
-        self.edge_row = float(edge_row)
-        self._options = evaluator_options
-        ShapeEvaluator(self.edge_row, **evaluator_options)  # validate the options now, not on the first track
-        self._evaluators: dict[int, ShapeEvaluator] = {}
-
-    def reset(self) -> None:
-        """Forget every track's evaluation."""
-        self._evaluators.clear()
-
-    def update(self, tracks: TrackUpdate, stamp: float) -> list[ShapeResult]:
-        """Feed the tracks seen this frame and close the ended ones; returns the results decided now."""
-        results: list[ShapeResult] = []
-        for track in tracks.active:
-            if track.unseen:
-                continue
-            evaluator = self._evaluators.get(track.track_id)
-            if evaluator is None:
-                evaluator = self._evaluators[track.track_id] = ShapeEvaluator(self.edge_row, **self._options)
-            result = evaluator.update(track.blob.contour, stamp)
-            if result is not None:
-                results.append(replace(result, track_id=track.track_id, lane=track.lane))
-        for track in tracks.ended:
-            evaluator = self._evaluators.pop(track.track_id, None)
-            result = evaluator.finish() if evaluator is not None else None
-            if result is not None:
-                results.append(replace(result, track_id=track.track_id, lane=track.lane))
-        return results

@@ -196,7 +196,8 @@ class SidePassageTracker:
         self._passages = [p for p in self._passages if p.unseen < self.end_frames]
         return [m for m in (self._measure(p) for p in done) if m is not None]
 
-    def _observe(self, passage: _Passage, own: np.ndarray, stat: np.ndarray, centroid: np.ndarray, stamp: float) -> None:
+    def _observe(self, passage: _Passage, own: np.ndarray, stat: np.ndarray, centroid: np.ndarray,
+                 stamp: float) -> None:
         """``own``: the blob's pixels within its bounding box ``stat`` (frame coordinates)."""
         u, v = float(centroid[0]), float(centroid[1])
         passage.centroid, passage.last_stamp, passage.unseen = (u, v), stamp, 0

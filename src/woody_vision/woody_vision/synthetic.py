@@ -18,20 +18,19 @@ the belt top line, and pink strips that either drape around the roller
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import cv2
 import numpy as np
 
+from woody_common.line import SIDE_ROLLER_RADIUS_PX, TOP_CAMERA_HEIGHT_M, TOP_EDGE_OFFSET_M
 from woody_vision.camera_model import Intrinsics, edge_row, intrinsics_from_k
 
 TOP_WIDTH = 672
 TOP_HEIGHT = 376
 TOP_FX = (TOP_WIDTH / 2.0) / math.tan(math.radians(85.0) / 2.0)
 DEFAULT_TOP_K = (TOP_FX, 0.0, TOP_WIDTH / 2.0, 0.0, TOP_FX, TOP_HEIGHT / 2.0, 0.0, 0.0, 1.0)
-DEFAULT_CAMERA_HEIGHT_M = 0.75
-DEFAULT_EDGE_OFFSET_M = 0.20
 FLOOR_DROP_M = 0.60
 REMOVE_DROP_M = 0.35
 """A fillet entirely this far below the belt has fallen and is no longer drawn (as in the simulator)."""
@@ -95,8 +94,8 @@ class TopScene:
 
     fillets: Sequence[TopFillet]
     k: tuple[float, ...] = DEFAULT_TOP_K
-    camera_height_m: float = DEFAULT_CAMERA_HEIGHT_M
-    edge_offset_m: float = DEFAULT_EDGE_OFFSET_M
+    camera_height_m: float = TOP_CAMERA_HEIGHT_M
+    edge_offset_m: float = TOP_EDGE_OFFSET_M
     width: int = TOP_WIDTH
     height: int = TOP_HEIGHT
 
@@ -248,7 +247,7 @@ class SideScene:
     """The side camera's fixed scenery."""
 
     axle_uv: tuple[float, float] = (480.0, 300.0)
-    roller_radius_px: float = 48.0
+    roller_radius_px: float = SIDE_ROLLER_RADIUS_PX
     width: int = SIDE_WIDTH
     height: int = SIDE_HEIGHT
 

@@ -13,8 +13,8 @@ consecutive frames without a match (paper: 15).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment

@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
-from typing import Iterator
 
 import cv2
 import numpy as np
 
+from woody_common.line import LANE_PITCH_M, LANES
 from woody_vision.camera_model import LaneLayout
 from woody_vision.grader_core import FilletGrader, TrackObservation
 from woody_vision.segmentation import BackgroundModel, SegmentationParams, segment_depth
@@ -36,8 +37,6 @@ from woody_vision.tracking import CentroidTracker
 
 FRAME_RATE_HZ = 30.0
 """Top camera rate (line_sim default ``top_rate_hz``)."""
-LANES = 3
-LANE_PITCH_M = 0.16
 VISIBLE_TRAVEL_M = 0.70
 """Mean lead-to-lead spacing per lane that keeps one fillet per lane segmented on average (~0.6 m of belt in
 view plus the fillet's length and fall, less gaps); calibrated against the blob counts, which the result reports."""

@@ -14,7 +14,7 @@ import re
 import signal
 import sys
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
@@ -102,7 +102,8 @@ def init_checked(name: str, args: list[str] | None, **init_kwargs) -> int | None
     return None
 
 
-def run_node(name: str, factory: Callable[[], object], args: list[str] | None = None) -> int:
+def run_node(name: str, factory: Callable[[], object], args: list[str] | None = None,
+             help_text: str | None = None) -> int:
     """rclpy.init, build the node, spin until SIGINT/SIGTERM, close it; one-line errors on bad arguments.
 
     ``--help`` prints the node's parameters; any other non-ROS argument, a malformed or
@@ -110,7 +111,9 @@ def run_node(name: str, factory: Callable[[], object], args: list[str] | None = 
     SIGINT/SIGTERM only set a flag that the spin loop checks, so the node finishes the
     callback it is in, closes (its summary line) and exits 0; rclpy's own handlers would
     invalidate the context under a running callback. A node with ``spin(stop)`` runs its
-    own loop until the ``threading.Event`` is set.
+    own loop until the ``threading.Event`` is set. A node whose construction has side effects
+    (the recorder opens its bag) passes ``help_text`` so ``--help`` does not build it; the exit
+    code is the node's ``close()`` result when that is non-zero.
     """
     import rclpy
     from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException, ParameterException
@@ -122,6 +125,10 @@ def run_node(name: str, factory: Callable[[], object], args: list[str] | None = 
     code = init_checked(name, args, signal_handler_options=SignalHandlerOptions.NO)
     if code is not None:
         return code
+    if help_text is not None and non_ros_args(args):
+        print(help_text)
+        rclpy.try_shutdown()
+        return 0
     try:
         node = factory()
         check_overrides(node)
@@ -137,8 +144,8 @@ def run_node(name: str, factory: Callable[[], object], args: list[str] | None = 
         spin = getattr(node, "spin", None)
         code = int(spin(stop) or 0) if spin is not None else _spin_until(node, stop)
     finally:
-        _close(node)
-    return code
+        closed = _close(node)
+    return closed or code
 
 
 def _spin_until(node, stop: threading.Event) -> int:
@@ -159,9 +166,10 @@ def non_ros_args(args: list[str] | None) -> list[str]:
     return remove_ros_args(args=sys.argv if args is None else args)[1:]
 
 
-def _close(node, ack_budget_s: float = 2.0) -> None:
+def _close(node, ack_budget_s: float = 2.0) -> int:
     """Close the node (its summary line), let subscribers acknowledge what its reliable publishers sent
-    (a verdict published just before the stop must still reach the recorder), then destroy it."""
+    (a verdict published just before the stop must still reach the recorder), then destroy it.
+    Returns what ``close()`` returned (0 for None)."""
     import time
 
     import rclpy
@@ -174,7 +182,7 @@ def _close(node, ack_budget_s: float = 2.0) -> None:
         if left > 0 and publisher.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
             publisher.wait_for_all_acked(Duration(seconds=left))
     close = getattr(node, "close", None)
-    if close is not None:
-        close()
+    code = int(close() or 0) if close is not None else 0
     node.destroy_node()
     rclpy.try_shutdown()
+    return code

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from woody_tools.graph import namespace_args, write_params_file
+from woody_tools.processes import namespace_args, write_params_file
 
 
 def test_a_namespace_moves_the_node_and_gives_it_its_own_clock():

@@ -6,8 +6,8 @@ import numpy as np
 import pybullet
 
 from woody_sim.line_geometry import LineGeometry
-from woody_sim.render_baseline import TinyRendererScene, projection_matrix, view_matrix
 from woody_sim.rendering import LineRenderer, draped_poses, fillet_color, load_reference_visuals
+from woody_tools.benchmarks.tiny_renderer import TinyRendererScene, projection_matrix, view_matrix
 
 
 def test_opengl_matrices_project_like_the_pinhole_camera():

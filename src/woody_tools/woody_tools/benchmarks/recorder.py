@@ -6,7 +6,7 @@ Publishes /side_camera/image_raw (960x696 rgb8) at --side-rate Hz and
 them, then prints published vs recorded counts, MB/s and the recorder's CPU.
 Frames are a cycle of 16 synthetic scenes with sensor noise (sigma --noise),
 i.e. about as compressible as rendered camera images with noise.
-Not a test (too slow for the suite): `python tests/helpers/record_bench.py`.
+Not a test (too slow for the suite): `python -m woody_tools.benchmarks.recorder`.
 """
 
 import argparse
@@ -21,8 +21,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 
-from woody_tools.graph import NodeProcess, lease_domain
+from woody_tools.cpu_usage import cpu_seconds
 from woody_tools.mcap_io import bag_summary
+from woody_tools.processes import NodeProcess, lease_domain
 
 
 def frames(width, height, noise, depth=False, n=16):
@@ -45,11 +46,6 @@ def frames(width, height, noise, depth=False, n=16):
             img = np.clip(img, 0, 255).astype(np.uint8)
         out.append(img.tobytes())
     return out
-
-
-def cpu_seconds(pid):
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def main():
@@ -77,20 +73,38 @@ def main():
         ("/top_camera/color/image_raw", args.top_rate, 672, 376, "rgb8", frames(672, 376, args.noise)),
         ("/top_camera/depth/image_raw", args.top_rate, 672, 376, "32FC1", frames(672, 376, 0, depth=True)),
     ]
-    pubs = [(node.create_publisher(Image, topic, qos), rate, w, h, enc, data) for topic, rate, w, h, enc, data in streams]
+    pubs = [(node.create_publisher(Image, topic, qos), rate, w, h, enc, data)
+            for topic, rate, w, h, enc, data in streams]
     deadline = time.monotonic() + 20
     while any(p.get_subscription_count() == 0 for p, *_ in pubs) and time.monotonic() < deadline:
         time.sleep(0.05)
     time.sleep(0.5)
     msgs = []
-    for pub, rate, w, h, enc, data in pubs:
+    for _pub, _rate, w, h, enc, data in pubs:
         bpp = 4 if enc == "32FC1" else 3
         msgs.append([Image(height=h, width=w, encoding=enc, step=w * bpp, data=d) for d in data])
-    sent = [0] * len(pubs)
-    next_t = [0.0] * len(pubs)
     cpu0 = cpu_seconds(recorder.process.pid)
     start = time.monotonic()
-    while (now := time.monotonic() - start) < args.seconds:
+    sent = _publish_streams(pubs, msgs, args.seconds)
+    elapsed = time.monotonic() - start
+    cpu = cpu_seconds(recorder.process.pid) - cpu0
+    time.sleep(1.0)
+    code = recorder.stop(30)
+    print(f"recorder exit {code}; {elapsed:.1f} s; recorder CPU {cpu / elapsed:.2f} cores; "
+          f"bag {bag.stat().st_size / 1e6:.0f} MB")
+    _print_recorded(bag_summary(bag), streams, sent, elapsed)
+    print(recorder.log_tail(1))
+    node.destroy_node()
+    rclpy.try_shutdown()
+    bag.unlink()
+
+
+def _publish_streams(pubs, msgs, seconds: float) -> list[int]:
+    """Publish every stream at its rate for ``seconds`` (cycling its frames); the count sent per stream."""
+    sent = [0] * len(pubs)
+    next_t = [0.0] * len(pubs)
+    start = time.monotonic()
+    while (now := time.monotonic() - start) < seconds:
         k = min(range(len(pubs)), key=lambda j: next_t[j])
         if next_t[k] > now:
             time.sleep(next_t[k] - now)
@@ -98,25 +112,18 @@ def main():
         pub.publish(msgs[k][sent[k] % 16])
         sent[k] += 1
         next_t[k] = sent[k] / pubs[k][1]
-    elapsed = time.monotonic() - start
-    cpu = cpu_seconds(recorder.process.pid) - cpu0
-    time.sleep(1.0)
-    code = recorder.stop(30)
-    summary = bag_summary(bag)
+    return sent
+
+
+def _print_recorded(summary: dict, streams, sent: list[int], elapsed: float) -> None:
+    """Sent vs recorded per stream and the sustained message and payload rates."""
     total_bytes = 0
-    print(f"recorder exit {code}; {elapsed:.1f} s; recorder CPU {cpu / elapsed:.2f} cores; "
-          f"bag {bag.stat().st_size / 1e6:.0f} MB")
-    for (topic, rate, w, h, enc, data), n in zip(streams, sent):
+    for (topic, _rate, _w, _h, _enc, data), n in zip(streams, sent):
         got = summary["topics"].get(topic, {}).get("count", 0)
-        size = len(data[0])
-        total_bytes += got * size
+        total_bytes += got * len(data[0])
         print(f"  {topic}: sent {n} ({n / elapsed:.0f}/s), recorded {got} ({100 * got / max(n, 1):.1f} %)")
     total = sum(t["count"] for t in summary["topics"].values())
     print(f"  sustained: {total / elapsed:.0f} msgs/s, {total_bytes / elapsed / 1e6:.0f} MB/s of payload")
-    print(recorder.log_tail(1))
-    node.destroy_node()
-    rclpy.try_shutdown()
-    bag.unlink()
 
 
 if __name__ == "__main__":

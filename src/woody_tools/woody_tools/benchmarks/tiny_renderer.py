@@ -2,7 +2,7 @@
 
 Machines differ about 2x, so a render time alone says little; the ratio to
 ``getCameraImage`` on the same meshes, poses and camera, timed in the same
-run, does. The scene is posed as in :func:`woody_sim.rendering.benchmark_rendering`:
+run, does. The scene is posed as in :func:`woody_tools.benchmarks.rendering.benchmark_rendering`:
 every chain segment is one visual-only body, re-posed every frame.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pybullet

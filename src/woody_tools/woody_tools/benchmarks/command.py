@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from woody_tools.graph import NodeProcess, entry_point, lease_domain
+from woody_common.stamps import stamp_to_seconds
+from woody_tools.processes import NodeProcess, entry_point, lease_domain
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -85,8 +86,8 @@ def with_reference(figures: dict, reference: float) -> dict:
 
 
 def bench_sim(seconds: float) -> dict:
-    from woody_sim.line_world import benchmark_physics
-    from woody_sim.rendering import benchmark_rendering
+    from woody_tools.benchmarks.physics import benchmark_physics
+    from woody_tools.benchmarks.rendering import benchmark_rendering
 
     physics = {n: benchmark_physics(n, seconds) for n in (1, 3, 6)}
     render = benchmark_rendering(n_fillets=3, frames=120)
@@ -132,7 +133,7 @@ def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_
         node = rclpy.create_node("bench_clock", context=context)
         samples: list[tuple[float, float]] = []
         node.create_subscription(Clock, "/clock", lambda m: samples.append(
-            (time.monotonic(), m.clock.sec + m.clock.nanosec * 1e-9)), 100)
+            (time.monotonic(), stamp_to_seconds(m.clock))), 100)
         sim = NodeProcess("line_sim", {"lanes": lanes, "line_speed_fpm": speed_fpm, "top_rate_hz": 30.0,
                                        "side_rate_hz": side_rate_hz, "duration_s": warmup + seconds},
                           domain_id=lease.domain_id, log_dir=Path(logs))
@@ -153,9 +154,8 @@ def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_
 
 
 def bench_vision(frames: int, seconds: float) -> dict:
-    from woody_vision.bench import benchmark_vision
-
-    from woody_tools.vision_latency import measure_verdict_latency
+    from woody_tools.benchmarks.verdict_latency import measure_verdict_latency
+    from woody_tools.benchmarks.vision import benchmark_vision
 
     figures = dict(benchmark_vision(frames=frames))
     latency = measure_verdict_latency(seconds)  # closing frame published -> verdict received, across processes

@@ -18,8 +18,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import IO, Sequence
+from typing import IO
 
 MAX_DOMAIN_ID = 232
 """Highest domain id whose Fast DDS ports stay valid."""
@@ -42,7 +43,7 @@ class DomainLease:
             self._lock_file.close()
             self._lock_file = None
 
-    def __enter__(self) -> "DomainLease":
+    def __enter__(self) -> DomainLease:
         return self
 
     def __exit__(self, *exc: object) -> None:

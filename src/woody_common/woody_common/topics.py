@@ -1,0 +1,13 @@
+"""Topic names that more than one woody package publishes or subscribes (relative names, REP 135).
+
+A namespace (``--ros-args -r __ns:=/line2``) moves them all together.
+"""
+
+GROUND_TRUTH = "line/ground_truth"
+TOP_COLOR_IMAGE = "top_camera/color/image_raw"
+TOP_DEPTH_IMAGE = "top_camera/depth/image_raw"
+TOP_DEPTH_INFO = "top_camera/depth/camera_info"
+SIDE_IMAGE = "side_camera/image_raw"
+TRACKS = "vision/tracks"
+VERDICTS = "grading/verdicts"
+GATE_COMMANDS = "reject_gate/commands"

@@ -1,0 +1,362 @@
+"""Verdict tables and the line report: ground truth joined with verdicts, plots, accuracy.
+
+Plain module (no rclpy): `woody run` and `woody report` both build the same
+table and report from lists of dicts, whether they came from live topics, a
+bag or a CSV written earlier.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from woody_common.line import FPM_TO_MPS
+
+VERDICT_COLUMNS = [
+    "fillet_id", "lane", "mesh", "k", "speed_fpm", "phi", "hu_term", "solidity_term",
+    "nmdm", "mdm", "be", "verdict", "grade", "truth", "sim_id", "mass", "spawn_time", "verdict_time", "reason",
+    "threshold",
+]
+"""Columns of verdicts.csv: the issue's twelve first, then what an analyst needs to audit a row."""
+
+MATCH_TOLERANCE_S = 0.6
+"""A verdict belongs to a spawned fillet when it closes this close to the expected edge crossing."""
+
+
+@dataclass(frozen=True)
+class Spawn:
+    """Ground truth of one spawned fillet (from /line/ground_truth)."""
+
+    sim_id: int
+    lane: int
+    mesh: str
+    k: float
+    mass: float
+    line_speed: float
+    stamp: float
+    spawn_x: float
+
+    @property
+    def expected_crossing(self) -> float:
+        """Sim time at which the fillet's centre reaches the roller edge (x = 0)."""
+        return self.stamp + abs(self.spawn_x) / max(self.line_speed, 1e-9)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One /grading/verdicts message, flattened."""
+
+    fillet_id: int
+    lane: int
+    stamp: float
+    classification: str
+    grade: str
+    phi: float
+    hu_term: float
+    solidity_term: float
+    nmdm: float
+    mdm: float
+    be: float
+    reason: str = ""
+    threshold: float = float("nan")
+
+
+def truth_of(k: float, woody_k: float) -> str:
+    """Ground-truth class of a fillet from its stiffness."""
+    return "woody" if k >= woody_k else "normal"
+
+
+def join(spawns: Sequence[Spawn], verdicts: Sequence[Verdict], woody_k: float = 50.0) -> list[dict]:
+    """One row per spawned fillet (and per verdict nobody spawned), matched by lane and edge-crossing time."""
+    rows: list[dict] = []
+    used: set[int] = set()
+    for spawn in sorted(spawns, key=lambda s: (s.expected_crossing, s.lane)):
+        best, best_dt = None, MATCH_TOLERANCE_S
+        for i, verdict in enumerate(verdicts):
+            if i in used or verdict.lane != spawn.lane:
+                continue
+            dt = abs(verdict.stamp - spawn.expected_crossing)
+            if dt <= best_dt:
+                best, best_dt = i, dt
+        verdict = None if best is None else verdicts[best]
+        if best is not None:
+            used.add(best)
+        rows.append(_row(spawn, verdict, woody_k))
+    rows += [_row(None, v, woody_k) for i, v in enumerate(verdicts) if i not in used]
+    return rows
+
+
+def _row(spawn: Spawn | None, verdict: Verdict | None, woody_k: float) -> dict:
+    nan = float("nan")
+    row = {column: "" for column in VERDICT_COLUMNS}
+    if spawn is not None:
+        row.update(sim_id=spawn.sim_id, lane=spawn.lane, mesh=spawn.mesh, k=spawn.k, mass=spawn.mass,
+                   speed_fpm=round(spawn.line_speed / FPM_TO_MPS, 3), spawn_time=round(spawn.stamp, 4),
+                   truth=truth_of(spawn.k, woody_k))
+    if verdict is None:
+        row.update(fillet_id="", phi=nan, hu_term=nan, solidity_term=nan, nmdm=nan, mdm=nan, be=nan, threshold=nan,
+                   verdict="missing", reason="no verdict was published for this fillet")
+        return row
+    row.update(fillet_id=verdict.fillet_id, lane=verdict.lane, phi=verdict.phi, hu_term=verdict.hu_term,
+               solidity_term=verdict.solidity_term, nmdm=verdict.nmdm, mdm=verdict.mdm, be=verdict.be,
+               verdict=verdict.classification, grade=verdict.grade, verdict_time=round(verdict.stamp, 4),
+               threshold=verdict.threshold,
+               reason=verdict.reason if verdict.reason else ("" if spawn else "no spawned fillet matches"))
+    return row
+
+
+def write_csv(rows: Iterable[dict], path: Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=VERDICT_COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({key: _fmt(value) for key, value in row.items()})
+    return path
+
+
+def _fmt(value: object) -> object:
+    if isinstance(value, float):
+        return "" if math.isnan(value) else f"{value:.6g}"
+    return value
+
+
+def read_csv(path: Path) -> list[dict]:
+    """Rows of a verdicts.csv, numbers parsed back (empty cells → NaN)."""
+    numeric = {"k", "speed_fpm", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be", "mass",
+               "spawn_time", "verdict_time", "threshold"}
+    with Path(path).open(newline="") as handle:
+        reader = csv.DictReader(handle)
+        missing = {"fillet_id", "lane", "k", "phi", "verdict"} - set(reader.fieldnames or [])
+        if missing:
+            raise ValueError(f"{path}: not a verdict table (missing columns {sorted(missing)})")
+        rows = []
+        for raw in reader:
+            row = dict(raw)
+            for key in numeric & row.keys():
+                row[key] = float(row[key]) if row[key] not in ("", None) else float("nan")
+            row["lane"] = int(row["lane"]) if row.get("lane") not in ("", None) else -1
+            rows.append(row)
+    return rows
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    scored: int
+    correct: int
+    unscored: int
+    missing: int
+    confusion: dict[tuple[str, str], int]
+    line_correct: int = 0
+
+    @property
+    def accuracy(self) -> float:
+        """Over the scored fillets only."""
+        return self.correct / self.scored if self.scored else float("nan")
+
+    @property
+    def line_accuracy(self) -> float:
+        """Over every fillet on the line: one without a normal/woody verdict is not diverted, i.e. passes as normal."""
+        total = self.scored + self.unscored + self.missing
+        return self.line_correct / total if total else float("nan")
+
+
+def accuracy(rows: Sequence[dict]) -> Accuracy:
+    """Accuracy of normal/woody verdicts against ground truth, over the scored fillets and over the whole line."""
+    confusion = {(t, p): 0 for t in ("normal", "woody") for p in ("normal", "woody")}
+    scored = correct = unscored = missing = line_correct = 0
+    for row in rows:
+        if not row.get("truth"):
+            continue
+        if row["verdict"] == "missing":
+            missing += 1
+        elif row["verdict"] not in ("normal", "woody"):
+            unscored += 1
+        else:
+            scored += 1
+            correct += row["verdict"] == row["truth"]
+            confusion[(row["truth"], row["verdict"])] += 1
+        line_correct += (row["verdict"] == "woody") == (row["truth"] == "woody")
+    return Accuracy(scored, correct, unscored, missing, confusion, line_correct)
+
+
+def accuracy_title(acc: Accuracy) -> str:
+    """Both accuracies, so an unscored woody fillet (not diverted) never hides behind a scored 100 %."""
+    if not acc.scored and not (acc.unscored + acc.missing):
+        return "no fillets with ground truth"
+    scored = f"{acc.accuracy:.1%}" if acc.scored else "n/a"
+    return f"line accuracy {acc.line_accuracy:.1%}, scored {scored}"
+
+
+def report_threshold(rows: Sequence[dict], run_info: dict | None) -> float | None:
+    """The Φ threshold the grader used (from its verdicts), else the one in the run settings."""
+    used = sorted({r["threshold"] for r in rows if isinstance(r.get("threshold"), float)
+                   and not math.isnan(r["threshold"])})
+    return used[0] if used else _first_float(run_info, "threshold")
+
+
+def verdict_table(rows: Sequence[dict], limit: int = 40) -> str:
+    """A fixed-width table of the main columns for the terminal."""
+    columns = ["fillet_id", "lane", "mesh", "k", "speed_fpm", "phi", "nmdm", "verdict", "truth"]
+    lines = ["  ".join(f"{c:>9}" for c in columns)]
+    for row in rows[:limit]:
+        cells = []
+        for c in columns:
+            value = row.get(c, "")
+            if isinstance(value, float):
+                value = "-" if math.isnan(value) else f"{value:.3g}"
+            cells.append(f"{str(value)[:9]:>9}")
+        lines.append("  ".join(cells))
+    if len(rows) > limit:
+        lines.append(f"... {len(rows) - limit} more rows")
+    return "\n".join(lines)
+
+
+def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody line run",
+                 run_info: dict | None = None, notes: Sequence[str] = ()) -> Path:
+    """Write report.md and its PNG plots into ``out_dir``; returns the report path.
+
+    ``notes`` (mesh files skipped or converted, where a truncated bag ends) are listed at the
+    top, so nothing left out of the figures goes unsaid.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    acc = accuracy(rows)
+    scored = [r for r in rows if r["verdict"] in ("normal", "woody") and r.get("k") != ""]
+    _plot_phi(scored, report_threshold(rows, run_info), out_dir / "phi_by_k_lane.png")
+    side = [r for r in scored if isinstance(r.get("nmdm"), float) and not math.isnan(r["nmdm"])]
+    _plot_nmdm(side, out_dir / "nmdm_by_k.png")
+    _plot_confusion(acc, out_dir / "confusion.png")
+    lines = [f"# {title}", ""]
+    if run_info:
+        lines += ["| setting | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in run_info.items()] + [""]
+    lines += [f"- {note}" for note in notes] + ([""] if notes else [])
+    lines += _markdown_body(rows, scored, side, acc)
+    path = out_dir / "report.md"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def _groups(rows: Sequence[dict]) -> tuple[list[float], list[int]]:
+    return sorted({float(r["k"]) for r in rows}), sorted({int(r["lane"]) for r in rows})
+
+
+def _plot_phi(scored: Sequence[dict], threshold: float | None, path: Path) -> None:
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    ks, lanes = _groups(scored)
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    width = 0.8 / max(len(lanes), 1)
+    for j, lane in enumerate(lanes):
+        for i, k in enumerate(ks):
+            values = [r["phi"] for r in scored if float(r["k"]) == k and int(r["lane"]) == lane]
+            x = i + (j - (len(lanes) - 1) / 2) * width
+            ax.scatter(np.full(len(values), x), values, s=14, color=f"C{j}", label=f"lane {lane}" if i == 0 else None)
+            if values:
+                ax.hlines(np.mean(values), x - width / 2, x + width / 2, color=f"C{j}")
+    if threshold is not None:
+        ax.axhline(threshold, color="k", ls="--", lw=0.8, label=f"threshold {threshold:g} (below: woody)")
+    ax.set_xticks(range(len(ks)), [f"k={k:g}" for k in ks])
+    ax.set_ylabel("shape score Φ")
+    ax.set_title("Φ per stiffness and lane")
+    if lanes or threshold is not None:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_nmdm(side: Sequence[dict], path: Path) -> None:
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    ks, _ = _groups(side)
+    fig, ax = plt.subplots(figsize=(5.0, 3.6))
+    for i, k in enumerate(ks):
+        values = [r["nmdm"] for r in side if float(r["k"]) == k]
+        ax.scatter(np.full(len(values), i), values, s=16, color="C3")
+        if values:
+            ax.hlines(np.mean(values), i - 0.3, i + 0.3, color="C3")
+    ax.set_xticks(range(len(ks)), [f"k={k:g}" for k in ks])
+    ax.set_ylabel("NMDM (side view)")
+    ax.set_title("NMDM per stiffness (watched lane)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_confusion(acc: Accuracy, path: Path) -> None:
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(4.2, 3.6))
+    labels = ["normal", "woody"]
+    matrix = np.array([[acc.confusion[(t, p)] for p in labels] for t in labels])
+    ax.imshow(matrix, cmap="Blues")
+    for (i, j), value in np.ndenumerate(matrix):
+        ax.text(j, i, str(value), ha="center", va="center", fontsize=14)
+    ax.set_xticks([0, 1], labels)
+    ax.set_yticks([0, 1], labels)
+    ax.set_xlabel(f"verdict (+{acc.unscored + acc.missing} unscored, not shown)" if acc.unscored + acc.missing
+                  else "verdict")
+    ax.set_ylabel("ground truth")
+    ax.set_title(accuracy_title(acc), fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _markdown_body(rows: Sequence[dict], scored: Sequence[dict], side: Sequence[dict], acc: Accuracy) -> list[str]:
+    ks, lanes = _groups(scored)
+    line = f"**{acc.line_accuracy:.1%}**" if acc.scored + acc.unscored + acc.missing else "n/a"
+    lines = [
+        "## Accuracy against ground truth", "",
+        f"- line accuracy (every fillet; one without a verdict is not diverted): {line}",
+        f"- scored fillets: {acc.scored}, correct: {acc.correct}, accuracy: "
+        + (f"**{acc.accuracy:.1%}**" if acc.scored else "n/a"),
+        f"- unscored (window never closed cleanly): {acc.unscored}; no verdict at all: {acc.missing}", "",
+        "![confusion](confusion.png)", "",
+        "## Shape score Φ per stiffness and lane", "",
+        "| k | lane | n | Φ mean ± sd | Hu term | solidity term |", "|---|---|---|---|---|---|",
+    ]
+    for k in ks:
+        for lane in lanes:
+            group = [r for r in scored if float(r["k"]) == k and int(r["lane"]) == lane]
+            if group:
+                lines.append(f"| {k:g} | {lane} | {len(group)} | {_mean_sd([r['phi'] for r in group])} | "
+                             f"{_mean_sd([r['hu_term'] for r in group], 3)} | "
+                             f"{_mean_sd([r['solidity_term'] for r in group], 4)} |")
+    lines += ["", "![phi](phi_by_k_lane.png)", "", "## Side view (watched lane)", "",
+              "| k | n | NMDM | MDM (px) | BE |", "|---|---|---|---|---|"]
+    for k in _groups(side)[0]:
+        group = [r for r in side if float(r["k"]) == k]
+        lines.append(f"| {k:g} | {len(group)} | {_mean_sd([r['nmdm'] for r in group], 3)} | "
+                     f"{_mean_sd([r['mdm'] for r in group], 1)} | {_mean_sd([r['be'] for r in group], 1)} |")
+    lines += ["", "![nmdm](nmdm_by_k.png)", "", "## Verdicts", "", "```", verdict_table(rows, limit=200), "```", ""]
+    return lines
+
+
+def _first_float(info: dict | None, key: str) -> float | None:
+    if not info or key not in info:
+        return None
+    try:
+        return float(info[key])
+    except (TypeError, ValueError):
+        return None
+
+
+def _mean_sd(values: Sequence[float], digits: int = 2) -> str:
+    import numpy as np
+
+    data = np.array([v for v in values if isinstance(v, float) and not math.isnan(v)])
+    if data.size == 0:
+        return "–"
+    return f"{data.mean():.{digits}f} ± {data.std(ddof=1) if data.size > 1 else 0.0:.{digits}f}"

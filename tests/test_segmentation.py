@@ -1,0 +1,230 @@
+"""woody_vision.segmentation on synthetic depth frames: touching fillets split, outlines kept, bad pixels handled.
+
+Frames come from woody_vision.synthetic (a nadir pinhole camera over the belt end).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from woody_common.line import TOP_CAMERA_HEIGHT_M
+from woody_vision.camera_model import LaneLayout
+from woody_vision.segmentation import (
+    DEFAULT_HEIGHT_THRESHOLD_M,
+    REAL_CAMERA_FILTERS,
+    BackgroundModel,
+    Blob,
+    SegmentationParams,
+    height_map,
+    segment_depth,
+)
+from woody_vision.synthetic import (
+    DEFAULT_TOP_K,
+    TopFillet,
+    TopScene,
+)
+from woody_vision.tracking import CentroidTracker
+
+FPS = 30.0
+
+
+def segment(fillets, t: float = 0.0, params: SegmentationParams | None = None) -> list[Blob]:
+    scene = TopScene(fillets)
+    return segment_depth(scene.render(t)[1], scene.background_depth(), params or SegmentationParams())
+
+
+def mask_components(fillets, t: float = 0.0) -> int:
+    """Connected components of the thresholded, opened mask: >1 fillet per component means they touch."""
+    scene = TopScene(fillets)
+    height = height_map(scene.render(t)[1], scene.background_depth())
+    mask = cv2.morphologyEx((height > DEFAULT_HEIGHT_THRESHOLD_M).astype(np.uint8), cv2.MORPH_OPEN,
+                            cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+    count, _, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    return sum(1 for i in range(1, count) if stats[i, cv2.CC_STAT_AREA] >= 500)
+
+
+L, W = 0.19, 0.095
+
+
+@pytest.mark.parametrize("overlap_m", [0.005, 0.01])
+@pytest.mark.parametrize("lead_m", [-0.2, 0.0])
+def test_tip_to_tail_touching_fillets_split_at_their_contact(overlap_m, lead_m):
+    """A follower touching its leader in the same lane: two blobs, each matching the fillet drawn alone."""
+    fillets = [TopFillet(lead_m=lead_m, across_m=0.0), TopFillet(lead_m=lead_m - L + overlap_m, across_m=0.0)]
+    t = 0.1 if lead_m == 0.0 else 0.0
+    assert mask_components(fillets, t) == 1, "precondition: the two fillets form one connected component"
+    blobs = segment(fillets, t)
+    singles = [segment([f], t)[0] for f in fillets]
+    assert len(blobs) == 2
+    for single in singles:
+        match = min(blobs, key=lambda b: math.dist(b.centroid, single.centroid))
+        assert math.dist(match.centroid, single.centroid) < 1.5
+        assert abs(match.area_px - single.area_px) < 0.03 * single.area_px
+
+
+@pytest.mark.parametrize("overlap_m,stagger_m", [(0.0, 0.0), (0.004, 0.0), (0.008, 0.01), (0.002, 0.03)])
+def test_side_by_side_fillets_across_lanes_split_into_two_blobs_and_tracks(overlap_m, stagger_m):
+    """Neighbours in two lanes touching along their length (one distance core, two end notches)."""
+    pitch = W - overlap_m
+    layout = LaneLayout(DEFAULT_TOP_K, TOP_CAMERA_HEIGHT_M, 2, pitch)
+    fillets = [TopFillet(lead_m=-0.25, across_m=pitch / 2), TopFillet(lead_m=-0.25 - stagger_m, across_m=-pitch / 2)]
+    assert mask_components(fillets) == 1, "precondition: the two fillets form one connected component"
+    singles = [segment([f])[0] for f in fillets]
+    blobs = segment(fillets)
+    assert len(blobs) == 2
+    for single in singles:
+        match = min(blobs, key=lambda b: math.dist(b.centroid, single.centroid))
+        assert math.dist(match.centroid, single.centroid) < 2.0
+        assert abs(match.area_px - single.area_px) < 0.06 * single.area_px
+
+    tracker = CentroidTracker(lane_layout=layout)
+    scene = TopScene(fillets)
+    ids_per_lane: dict[int, set[int]] = {0: set(), 1: set()}
+    for i in range(8):
+        update = tracker.update(segment_depth(scene.render(i / FPS)[1], scene.background_depth()))
+        assert len(update.active) == 2 and not update.ended
+        for track in update.active:
+            ids_per_lane[track.lane].add(track.track_id)
+    assert ids_per_lane == {0: {0}, 1: {1}} or ids_per_lane == {0: {1}, 1: {0}}
+
+
+@pytest.mark.parametrize("mesh", [0, 1, 2])
+def test_a_rigid_fillet_keeps_its_segmented_outline_as_it_passes_the_roller_edge(mesh):
+    """Past the edge the background is the floor, so rim thinner than the height threshold, hidden on the belt,
+    would appear there and grow the outline of a fillet that does not bend at all (the old Φ floor)."""
+    from woody_sim.line_geometry import LineGeometry
+    from woody_sim.rendering import LineRenderer, flat_poses, load_reference_visuals
+
+    geometry = LineGeometry()
+    visuals, offsets = load_reference_visuals(mesh, 40)
+    renderer = LineRenderer(geometry, render_side=False)
+    renderer.add_fillet(0, 1, visuals)
+    background = renderer.render_top({})[1]
+
+    def area(centre_x: float, params: SegmentationParams) -> int:
+        depth = renderer.render_top({0: flat_poses(offsets, centre_x, geometry.lane_y(1))})[1]
+        (blob,) = segment_depth(depth, background, params)
+        return blob.area_px
+
+    def growth(params: SegmentationParams) -> float:  # fully on the belt, then ~5 cm overhanging, still flat
+        return area(-0.04, params) / area(-0.15, params) - 1.0
+
+    assert abs(growth(SegmentationParams())) < 0.003
+    assert growth(SegmentationParams(height_threshold_m=0.005)) > 0.005
+
+
+def test_single_fillets_are_never_split_while_crossing_the_edge():
+    rng = np.random.default_rng(4)
+    for _ in range(8):
+        fillet = TopFillet(lead_m=-0.15, across_m=rng.uniform(-0.3, 0.3), length_m=rng.uniform(0.17, 0.22),
+                           width_m=rng.uniform(0.08, 0.11), thickness_m=rng.uniform(0.02, 0.035),
+                           curvature_per_m=rng.uniform(0.0, 16.0), tip_rate_per_m=rng.uniform(6.0, 20.0))
+        scene = TopScene([fillet])
+        for i in range(0, 36, 3):
+            assert len(segment_depth(scene.render(i / FPS)[1], scene.background_depth())) <= 1
+
+
+def test_blob_geometry_matches_the_drawn_fillet():
+    scene = TopScene([TopFillet(lead_m=-0.2, across_m=0.05)])
+    (blob,) = segment_depth(scene.render(0.0)[1], scene.background_depth())
+    intr = scene.intrinsics
+    expected_u = intr.cx + intr.fx * 0.05 / (TOP_CAMERA_HEIGHT_M - 0.02)
+    assert blob.centroid[0] == pytest.approx(expected_u, abs=1.0)
+    u, v, w, h = blob.bbox
+    assert (blob.contour[:, 0].min(), blob.contour[:, 1].min()) == (u, v)
+    assert (blob.contour[:, 0].max(), blob.contour[:, 1].max()) == (u + w - 1, v + h - 1)
+    assert 0.005 < blob.mean_height_m < 0.03
+
+
+def test_small_specks_are_dropped():
+    background = np.full((120, 160), 0.75, np.float32)
+    depth = background.copy()
+    depth[10:30, 10:30] = 0.72  # 400 px: below the 500 px minimum
+    depth[50:100, 50:110] = 0.72  # 3000 px: kept
+    blobs = segment_depth(depth, background)
+    assert len(blobs) == 1 and blobs[0].area_px == pytest.approx(3000, abs=10)  # opening rounds the corners
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
+def test_non_finite_depth_gives_no_blobs(value):
+    background = TopScene([]).background_depth()
+    assert segment_depth(np.full_like(background, value), background) == []
+    depth = background.copy()
+    depth[100:160, 200:300] = value  # a patch of bad returns is not a fillet
+    assert segment_depth(depth, background) == []
+
+
+def test_non_finite_pixels_inside_a_fillet_do_not_poison_it():
+    background = np.full((200, 200), 0.75, np.float32)
+    background[:5] = np.nan  # never-measured background pixels never rise
+    depth = background.copy()
+    depth[50:150, 50:150] = 0.72
+    depth[90:95, 90:95] = np.nan
+    depth[0:3, 0:100] = 0.1
+    (blob,) = segment_depth(depth, background)
+    assert blob.area_px == pytest.approx(100 * 100 - 25, abs=20)
+    assert blob.mean_height_m == pytest.approx(0.03, abs=1e-6)
+
+
+def test_holes_and_noise_of_a_real_camera_are_filled_and_smoothed_before_the_contour():
+    rng = np.random.default_rng(0)
+    background = np.full((200, 200), 0.75, np.float32)
+    depth = background + rng.normal(0.0, 0.002, background.shape).astype(np.float32)
+    depth[50:150, 50:150] -= 0.02
+    depth[45:56, 90:101] = np.nan  # a hole across the top border
+    depth[120:126, 145:151] = 0.0  # and one on the right border
+    raw = segment_depth(depth, background)
+    (clean,) = segment_depth(depth, background, SegmentationParams(**REAL_CAMERA_FILTERS))
+    assert clean.area_px == pytest.approx(100 * 100, rel=0.05)  # the blur widens a 20 mm step by ~1 px a side
+    hull = cv2.contourArea(cv2.convexHull(clean.contour))
+    assert cv2.contourArea(clean.contour) / hull > 0.97  # no notches left by the holes
+    assert sum(b.area_px for b in raw) < clean.area_px
+    for bad in (dict(median_px=4), dict(blur_px=-1.0), dict(fill_invalid_px=-1)):
+        with pytest.raises(ValueError):
+            SegmentationParams(**bad)
+
+
+def test_empty_frames_give_no_blobs():
+    background = TopScene([]).background_depth()
+    assert segment_depth(background.copy(), background) == []
+    empty = np.zeros((0, 0), np.float32)
+    assert segment_depth(empty, empty) == []
+    assert segment_depth(np.zeros((0, 672), np.float32), np.zeros((0, 672), np.float32)) == []
+
+
+def test_background_model_ignores_missing_returns():
+    model = BackgroundModel(frames_needed=3)
+    a = np.full((4, 4), 0.75, np.float32)
+    b = a.copy()
+    b[0, 0] = np.nan
+    c = a.copy()
+    c[0, 0] = np.inf
+    c[1, 1] = np.nan
+    assert not model.add(a) and not model.add(b)
+    with pytest.raises(RuntimeError):
+        _ = model.depth
+    assert model.add(c)
+    assert np.allclose(model.depth, 0.75)
+    never = BackgroundModel(1)
+    never.add(np.full((2, 2), np.nan, np.float32))
+    assert np.isnan(never.depth).all()
+    assert segment_depth(np.full((2, 2), 0.1, np.float32), never.depth) == []
+    with pytest.raises(ValueError):
+        BackgroundModel(0)
+    model2 = BackgroundModel(2)
+    model2.add(a)
+    with pytest.raises(ValueError):
+        model2.add(np.zeros((3, 3), np.float32))
+    model.reset()
+    assert not model.ready
+
+
+def test_segmentation_params_are_validated():
+    for bad in (dict(height_threshold_m=0.0), dict(min_area_px=0), dict(open_kernel_px=-1),
+                dict(split_solidity=1.5), dict(core_ratio=1.0)):
+        with pytest.raises(ValueError):
+            SegmentationParams(**bad)

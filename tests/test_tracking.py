@@ -1,0 +1,175 @@
+"""woody_vision.tracking: stable ids and lanes over many frames, track ends, prediction across missed frames.
+
+Frames come from woody_vision.synthetic (a nadir pinhole camera over the belt end).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from woody_common.line import TOP_CAMERA_HEIGHT_M
+from woody_vision.camera_model import LaneLayout, lane_center_u
+from woody_vision.segmentation import (
+    DEFAULT_HEIGHT_THRESHOLD_M,
+    Blob,
+    segment_depth,
+)
+from woody_vision.synthetic import (
+    DEFAULT_TOP_K,
+    TopFillet,
+    TopScene,
+)
+from woody_vision.tracking import CentroidTracker, TrackUpdate
+
+FPS = 30.0
+LAYOUT3 = LaneLayout(DEFAULT_TOP_K, TOP_CAMERA_HEIGHT_M, 3, 0.16)
+L = 0.19
+"""Length (m) of the drawn fillets, as in test_segmentation."""
+
+
+def fillet_masks(fillets, t: float) -> list[np.ndarray]:
+    """Each fillet rendered alone: its own pixel mask (the ground truth for matching blobs)."""
+    out = []
+    for fillet in fillets:
+        scene = TopScene([fillet])
+        out.append((scene.background_depth() - scene.render(t)[1]) > DEFAULT_HEIGHT_THRESHOLD_M)
+    return out
+
+
+def owner(blob: Blob, masks: list[np.ndarray]) -> int:
+    """Index of the fillet whose own pixels cover most of the blob (-1 if none covers half of it)."""
+    filled = np.zeros(masks[0].shape, np.uint8)
+    cv2.fillPoly(filled, [blob.contour.reshape(-1, 1, 2)], 1)
+    overlaps = [int(np.count_nonzero(filled.astype(bool) & m)) for m in masks]
+    best = int(np.argmax(overlaps))
+    return best if overlaps[best] >= 0.5 * blob.area_px else -1
+
+
+def square_blob(u: float, v: float, half: int = 15) -> Blob:
+    contour = np.array([[u - half, v - half], [u + half, v - half], [u + half, v + half], [u - half, v + half]],
+                       np.int32)
+    return Blob(contour=contour, centroid=(float(u), float(v)), area_px=(2 * half) ** 2,
+                bbox=(int(u - half), int(v - half), 2 * half, 2 * half), mean_height_m=0.02)
+
+
+def test_ids_stable_and_lanes_right_over_50_frames_of_several_fillets():
+    """9 fillets in 3 lanes (one touching pair) pass the view: one id per fillet for its whole passage."""
+    across = {0: 0.16, 1: 0.0, 2: -0.16}
+    leads = {0: [-0.05, -0.33, -0.62], 1: [-0.15, -0.15 - L + 0.005, -0.64], 2: [0.02, -0.30, -0.60]}
+    fillets, lanes = [], []
+    for lane, lane_leads in leads.items():
+        for k, lead in enumerate(lane_leads):
+            fillets.append(TopFillet(lead_m=lead, across_m=across[lane], curvature_per_m=3.0 + 5.0 * k))
+            lanes.append(lane)
+    scene = TopScene(fillets)
+    background = scene.background_depth()
+    tracker = CentroidTracker(lane_layout=LAYOUT3)
+    ids_of_fillet: dict[int, set[int]] = {}
+    fillets_of_id: dict[int, set[int]] = {}
+    seen_frames: dict[int, int] = {}
+    visible_frames: dict[int, int] = {}
+    ended: list[int] = []
+    for i in range(50):
+        t = i / FPS
+        blobs = segment_depth(scene.render(t)[1], background)
+        update = tracker.update(blobs)
+        ended += [track.track_id for track in update.ended]
+        masks = fillet_masks(fillets, t)
+        for k, m in enumerate(masks):
+            if np.count_nonzero(m) >= 1500:
+                visible_frames[k] = visible_frames.get(k, 0) + 1
+        by_blob = {id(track.blob): track for track in update.active if track.unseen == 0}
+        assert len(by_blob) == len(blobs), "every blob of this frame belongs to a track seen now"
+        for blob in blobs:
+            track = by_blob[id(blob)]
+            k = owner(blob, masks)
+            assert k >= 0, f"frame {i}: blob at {blob.centroid} is not mostly one fillet"
+            ids_of_fillet.setdefault(k, set()).add(track.track_id)
+            fillets_of_id.setdefault(track.track_id, set()).add(k)
+            seen_frames[k] = seen_frames.get(k, 0) + 1
+            assert track.lane == lanes[k], f"fillet {k} in lane {lanes[k]} tracked in lane {track.lane}"
+    assert set(ids_of_fillet) == set(range(len(fillets))), "every fillet was segmented at some point"
+    assert all(len(ids) == 1 for ids in ids_of_fillet.values()), ids_of_fillet
+    assert all(len(ks) == 1 for ks in fillets_of_id.values()), fillets_of_id
+    for k, frames in visible_frames.items():
+        assert seen_frames.get(k, 0) >= 0.9 * frames, f"fillet {k} segmented in too few of its frames"
+    # the three leaders fell past the edge long enough ago that their tracks ended, once each
+    leaders = [next(iter(ids_of_fillet[k])) for k in (0, 3, 6)]
+    assert sorted(set(ended) & set(leaders)) == sorted(leaders) and len(ended) == len(set(ended))
+
+
+def test_track_ends_after_max_unseen_frames_exactly_once():
+    tracker = CentroidTracker(max_unseen=5)
+    for v in (100, 110, 120):
+        update = tracker.update([square_blob(300, v)])
+    (track,) = update.active
+    for missed in range(1, 5):
+        update = tracker.update([])
+        assert [t.unseen for t in update.active] == [missed] and not update.ended
+        assert update.active[0].blob.centroid == (300.0, 120.0)  # stale blob kept
+    update = tracker.update([])
+    assert update.active == [] and [t.track_id for t in update.ended] == [track.track_id]
+    assert update.ended[0].unseen == 5
+    assert tracker.update([]) == TrackUpdate(active=[], ended=[])
+
+
+def test_new_blobs_open_new_tracks_and_ids_are_never_reused():
+    tracker = CentroidTracker(max_distance_px=40.0, max_unseen=2)
+    first = tracker.update([square_blob(100, 100)]).active[0].track_id
+    update = tracker.update([square_blob(100, 108), square_blob(400, 100)])  # far beyond the gate: new track
+    assert [t.track_id for t in update.active] == [first, first + 1]
+    assert update.active[0].age == 2 and update.active[1].age == 1
+    tracker.update([])
+    update = tracker.update([])
+    assert sorted(t.track_id for t in update.ended) == [first, first + 1]
+    reopened = tracker.update([square_blob(100, 116)]).active
+    assert [t.track_id for t in reopened] == [first + 2]
+    tracker.reset()
+    assert tracker.update([square_blob(100, 116)]).active[0].track_id == first + 3
+
+
+def test_prediction_bridges_missed_frames():
+    tracker = CentroidTracker(max_distance_px=20.0)
+    for v in (100, 110, 120):
+        (track,) = tracker.update([square_blob(200, v)]).active
+    tracker.update([])
+    tracker.update([])
+    (again,) = tracker.update([square_blob(200, 150)]).active  # 30 px from the last sighting, 0 from prediction
+    assert again.track_id == track.track_id and again.unseen == 0
+    assert again.velocity == pytest.approx((0.0, 10.0))
+
+
+def test_stale_track_ghost_does_not_steal_a_live_tracks_blob():
+    """A fillet falling off the edge moves backwards in the image; its extrapolated ghost must not take over."""
+    tracker = CentroidTracker(max_distance_px=40.0, max_unseen=15)
+    for i in range(3):
+        update = tracker.update([square_blob(300, 300 - 2 * i), square_blob(300, 200 + 6 * i)])
+    ghost, live = (t.track_id for t in sorted(update.active, key=lambda t: -t.blob.centroid[1]))
+    for i in range(3, 13):
+        v = 200 + 6 * i + (3 if i == 12 else 0)  # at frame 12 the ghost's prediction (276) is nearer than live's
+        update = tracker.update([square_blob(300, v)])
+        matched = [t.track_id for t in update.active if t.unseen == 0]
+        assert matched == [live], f"frame {i}"
+    assert ghost in [t.track_id for t in update.active]
+
+
+def test_lane_from_the_mean_column():
+    tracker = CentroidTracker(lane_layout=LAYOUT3)
+    blobs = [square_blob(LAYOUT3.lane_center_u(lane) + offset, 100) for lane, offset in ((0, 25), (1, -25), (2, 10))]
+    update = tracker.update(blobs)
+    assert {round(t.blob.centroid[0]): t.lane for t in update.active} == {
+        round(b.centroid[0]): lane for b, lane in zip(blobs, (0, 1, 2))}
+    assert LAYOUT3.lane_center_u(0) > LAYOUT3.lane_center_u(1) > LAYOUT3.lane_center_u(2)  # lane 0 on the right
+    assert LAYOUT3.lane_of_u(10_000) == 0 and LAYOUT3.lane_of_u(-10_000) == 2  # clamped
+    no_layout = CentroidTracker().update([square_blob(100, 100)]).active[0]
+    assert no_layout.lane == -1
+    assert lane_center_u(1, DEFAULT_TOP_K, TOP_CAMERA_HEIGHT_M, 3, 0.16) == pytest.approx(DEFAULT_TOP_K[2])
+
+
+def test_tracker_validates_its_options():
+    with pytest.raises(ValueError):
+        CentroidTracker(max_distance_px=0.0)
+    with pytest.raises(ValueError):
+        CentroidTracker(max_unseen=0)
