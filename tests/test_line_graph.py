@@ -78,9 +78,11 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
     vision = {"use_sim_time": True, "lanes": 3}
     nodes = [NodeProcess("segmenter", vision, domain_id=ros_domain, log_dir=tmp_path),
              NodeProcess("grader", vision, domain_id=ros_domain, log_dir=tmp_path),
-             NodeProcess("reject_gate", {"use_sim_time": True}, domain_id=ros_domain, log_dir=tmp_path),
-             NodeProcess("line_sim", {"fillets": 6, "duration_s": 5.5, "wait_for_subscribers": 1, "max_lead_s": 0.1},
-                         domain_id=ros_domain, log_dir=tmp_path)]
+             NodeProcess("reject_gate", {"use_sim_time": True}, domain_id=ros_domain, log_dir=tmp_path)]
+    # the line starts once the grader listens to the tracks, so no fillet's first frames go unheard
+    spin_until(ros_node, lambda: ros_node.count_subscribers("/vision/tracks") >= 1, timeout=60.0)
+    nodes.append(NodeProcess("line_sim", {"fillets": 6, "duration_s": 5.5, "wait_for_subscribers": 1,
+                                          "max_lead_s": 0.1}, domain_id=ros_domain, log_dir=tmp_path))
     try:
         spin_until(ros_node, lambda: not nodes[-1].alive() or not all(n.alive() for n in nodes[:3]), timeout=240.0)
         spin_until(ros_node, lambda: False, timeout=2.0)
