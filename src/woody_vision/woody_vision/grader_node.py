@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections import deque
 
 import cv2
 import numpy as np
@@ -50,6 +51,9 @@ MARKER_LIFETIME_NS = 200_000_000
 LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY,
           "unscored": FilletVerdict.CLASS_UNSCORED}
 
+
+EARLY_TRACKS = 900
+"""Track messages kept while camera_info has not arrived yet (30 s of a 30 Hz camera)."""
 
 class Grader(Node):
     """Scores Φ per track, pairs the watched lane with side-view metrics, publishes verdicts."""
@@ -91,6 +95,8 @@ class Grader(Node):
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
         self.watched_lane = (lanes - 1) // 2 if side_lane < 0 else side_lane
         self.core: FilletGrader | None = None
+        self.early_tracks: deque = deque(maxlen=EARLY_TRACKS)
+        """Track messages received before the first camera_info, graded as soon as it arrives."""
         self.side = SidePassageTracker(**self.side_options) if self.side_enabled else None
         self.side_checker = FrameChecker(self.get_logger())
         self.published = 0
@@ -116,11 +122,17 @@ class Grader(Node):
                                      self.evaluator_options)
             self.get_logger().info(f"roller edge at image row {row:.1f} (from camera_info K, camera height "
                                    f"{self.camera_height} m, edge offset {self.edge_offset} m)")
+            early, self.early_tracks = self.early_tracks, deque()
+            for msg in early:  # tracks that arrived before camera_info (discovery order) are graded, not lost
+                self.on_tracks(msg)
 
     def on_tracks(self, msg: FilletTrackArray) -> None:
         if self.core is None:
             if msg.tracks or msg.ended_ids:  # empty arrays (the segmenter learning its background) lose nothing
-                self.side_checker.reject("no camera_info on /top_camera/depth/camera_info yet; tracks skipped")
+                if len(self.early_tracks) == self.early_tracks.maxlen:
+                    self.side_checker.reject("no camera_info on top_camera/depth/camera_info yet; oldest tracks "
+                                             "dropped")
+                self.early_tracks.append(msg)
             return
         self.frame_id = msg.header.frame_id
         odd = [t.id for t in msg.tracks if len(t.contour_uv) % 2]
