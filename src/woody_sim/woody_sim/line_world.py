@@ -131,6 +131,11 @@ class _Fillet:
     """(N - 1,) hinge rates at the start of the last step."""
 
 
+def seed_dynamic_friction(friction_static: float) -> float:
+    """The slipping cap that goes with a static cap, at the seed's ratio 0.6 / 0.8."""
+    return round(0.75 * float(friction_static), 6)
+
+
 def calibrated_config(calibration: Calibration | None = None, **overrides) -> PhysicsConfig:
     """PhysicsConfig with the calibrated damper and drive friction (config/calibration.yaml), plus overrides."""
     cal = calibration or load_calibration()

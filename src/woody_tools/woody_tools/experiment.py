@@ -35,7 +35,7 @@ import numpy as np
 from woody_common.calibration import load_calibration
 from woody_common.line import fpm_to_mps
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
-from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
+from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config, seed_dynamic_friction
 from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer
 from woody_sim.sensor_model import sensor_preset
@@ -86,15 +86,16 @@ class RunSpec:
     """Hinge damper c; None = the calibrated one (config/calibration.yaml)."""
     friction_static: float | None = None
     """Drive friction cap (mu_dynamic keeps the seed's 0.75 ratio); None = the calibrated one."""
+    sensor: str = "ideal"
+    """Top camera error model (woody_sim.sensor_model preset), seeded per run."""
 
     def physics_overrides(self) -> dict:
         """PhysicsConfig fields this run sets itself (the rest come from the calibration)."""
         out = {} if self.damping is None else {"damping": self.damping}
         if self.friction_static is not None:
-            out.update(friction_static=self.friction_static, friction_dynamic=round(0.75 * self.friction_static, 6))
+            out.update(friction_static=self.friction_static,
+                       friction_dynamic=seed_dynamic_friction(self.friction_static))
         return out
-    sensor: str = "ideal"
-    """Top camera error model (woody_sim.sensor_model preset), seeded per run."""
 
     @property
     def key(self) -> tuple[str, float, float, float | None]:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from woody_sim.line_world import seed_dynamic_friction
 from woody_tools.paper_targets import DELTA_NMDM_RANGE, PAPER_NMDM, SPEED_GAIN_MIN
 
 
@@ -32,7 +33,7 @@ class FitPoint:
 
     @property
     def friction_dynamic(self) -> float:
-        return round(0.75 * self.friction_static, 6)
+        return seed_dynamic_friction(self.friction_static)
 
 
 def table_means(rows: list[dict]) -> dict[tuple[float, float], tuple[float, float]]:
