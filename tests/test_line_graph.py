@@ -97,7 +97,7 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
     assert len(verdicts) == 6, f"{len(verdicts)} verdicts for 6 fillets\n{logs}"
     assert sorted(v.lane for v in verdicts) == sorted(s.lane for s in spawns)
     scored = [v for v in verdicts if v.classification != FilletVerdict.CLASS_UNSCORED]
-    assert len(scored) >= 5, [v.unscored_reason for v in verdicts]
+    assert len(scored) >= 5, f"{[v.unscored_reason for v in verdicts]}\n{logs}"
     assert all(np.isfinite(v.phi) and v.phi >= 0 for v in scored)
     assert any(v.side_measured and np.isfinite(v.nmdm) for v in verdicts if v.lane == 1), "no side-view metrics"
     woody = [v for v in verdicts if v.classification == FilletVerdict.CLASS_WOODY]

@@ -11,3 +11,8 @@ SIDE_IMAGE = "side_camera/image_raw"
 TRACKS = "vision/tracks"
 VERDICTS = "grading/verdicts"
 GATE_COMMANDS = "reject_gate/commands"
+
+TRACKS_QUEUE_DEPTH = 900
+"""History of the reliable /vision/tracks link at both ends: 30 s of a 30 Hz camera. Track messages are
+small and a verdict needs a track's first frames, so a grader held up (a loaded machine, a replay that
+does not wait for it) must catch up from the queue instead of losing the oldest frames."""

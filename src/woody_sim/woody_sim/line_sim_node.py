@@ -290,7 +290,8 @@ class LineSim(Node):
         while not self._stop.is_set() and self.pacer.must_wait(now, time.monotonic() - start):
             executor.spin_once(timeout_sec=0.005)
         if self.pacer.stalls > stalls and self.pacer.stalls == 1:
-            self.get_logger().warning(f"/vision/tracks silent for {self.pacer.stall_s:g} s: running on without it")
+            self.get_logger().warning(f"/vision/tracks silent for {time.monotonic() - start:.0f} s: running on "
+                                      "without it")
 
     def _wait_for_subscribers(self, executor) -> None:
         if not self.wait_subscribers:

@@ -109,7 +109,8 @@ class Grader(Node):
         self.verdict_pub = self.create_publisher(FilletVerdict, topics.VERDICTS, reliable)
         self.marker_pub = self.create_publisher(ImageMarker, "grading/markers", 50) if markers else None
         self.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self.on_camera_info, sensor)
-        self.create_subscription(FilletTrackArray, topics.TRACKS, self.on_tracks, QoSProfile(depth=50))
+        self.create_subscription(FilletTrackArray, topics.TRACKS, self.on_tracks,
+                                 QoSProfile(depth=topics.TRACKS_QUEUE_DEPTH))
         if self.side is not None:
             self.create_subscription(Image, topics.SIDE_IMAGE, self.on_side_image, sensor)
         self.create_timer(0.1, self.on_timer)

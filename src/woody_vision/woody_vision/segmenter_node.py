@@ -66,7 +66,8 @@ class Segmenter(Node):
         self.info_size: tuple[int, int] | None = None
 
         sensor = declare_image_qos(self)
-        self.tracks_pub = self.create_publisher(FilletTrackArray, topics.TRACKS, QoSProfile(depth=50))
+        self.tracks_pub = self.create_publisher(FilletTrackArray, topics.TRACKS,
+                                                QoSProfile(depth=topics.TRACKS_QUEUE_DEPTH))
         self.frames = 0
         self.debug_pub = self.create_publisher(Image, "vision/debug_image", 5) if self.publish_debug else None
         self.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self.on_camera_info, sensor)
