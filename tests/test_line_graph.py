@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+
 import numpy as np
 import pytest
 from conftest import spin_until
@@ -64,6 +66,8 @@ def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_pa
 
 
 def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_path):
+    from rosgraph_msgs.msg import Clock
+
     from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
 
     verdicts: list = []
@@ -81,8 +85,15 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
              NodeProcess("reject_gate", {"use_sim_time": True}, domain_id=ros_domain, log_dir=tmp_path)]
     # the line starts once the grader listens to the tracks, so no fillet's first frames go unheard
     spin_until(ros_node, lambda: ros_node.count_subscribers("/vision/tracks") >= 1, timeout=60.0)
+    clock: list = []
+    ros_node.create_subscription(Clock, "/clock", clock.append, 10)
     nodes.append(NodeProcess("line_sim", {"fillets": 6, "duration_s": 5.5, "wait_for_subscribers": 1,
                                           "max_lead_s": 0.1}, domain_id=ros_domain, log_dir=tmp_path))
+    # a segmenter that stops answering right after the line starts (a loaded machine) must hold the line
+    spin_until(ros_node, lambda: bool(clock), timeout=60.0)
+    nodes[0].signal(signal.SIGSTOP)
+    spin_until(ros_node, lambda: False, timeout=8.0)
+    nodes[0].signal(signal.SIGCONT)
     try:
         spin_until(ros_node, lambda: not nodes[-1].alive() or not all(n.alive() for n in nodes[:3]), timeout=240.0)
         spin_until(ros_node, lambda: False, timeout=2.0)

@@ -286,12 +286,11 @@ class LineSim(Node):
         """With max_lead_s: wait (serving callbacks) until /vision/tracks has caught up to within the lead."""
         if self.pacer is None:
             return
-        start, stalls = time.monotonic(), self.pacer.stalls
-        while not self._stop.is_set() and self.pacer.must_wait(now, time.monotonic() - start):
+        stalls = self.pacer.stalls
+        while not self._stop.is_set() and self.pacer.must_wait(now):
             executor.spin_once(timeout_sec=0.005)
         if self.pacer.stalls > stalls and self.pacer.stalls == 1:
-            self.get_logger().warning(f"/vision/tracks silent for {time.monotonic() - start:.0f} s: running on "
-                                      "without it")
+            self.get_logger().warning("/vision/tracks silent: running on without it until it answers")
 
     def _wait_for_subscribers(self, executor) -> None:
         if not self.wait_subscribers:
