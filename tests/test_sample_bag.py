@@ -60,6 +60,10 @@ def replay_into_vision(bag, topics, ros_node, ros_domain, tmp_path, segmenter_pa
                                   log_dir=log_dir, namespace=ns),
                       NodeProcess("grader", {**vision, **grader_params}, domain_id=ros_domain, log_dir=log_dir,
                                   namespace=ns)]
+    # the segmenter -> grader link is volatile: tracks sent before it is up are lost, so the bag waits for it
+    for ns in lines:
+        spin_until(ros_node, lambda ns=ns: ros_node.count_publishers(f"{ns}/vision/tracks") >= 1
+                   and ros_node.count_subscribers(f"{ns}/vision/tracks") >= 1, timeout=60.0)
     replays = [NodeProcess("woody", None, domain_id=ros_domain, log_dir=tmp_path / f"replay{i}",
                            extra_args=["replay", str(bag), "--topics", *topics, "--namespace", ns])
                for i, ns in enumerate(lines)]
@@ -83,7 +87,8 @@ def assert_same_verdicts(received, expected, logs: str, phi_rel: float = 1e-6) -
         return (v.lane, v.header.stamp.sec, v.header.stamp.nanosec)
 
     for got, want in zip(sorted(received, key=key), sorted(expected, key=key)):
-        assert (got.lane, got.classification, got.header.stamp) == (want.lane, want.classification, want.header.stamp)
+        assert (got.lane, got.classification, got.header.stamp) == (want.lane, want.classification,
+                                                                    want.header.stamp), (got.unscored_reason, logs)
         assert got.phi == pytest.approx(want.phi, rel=phi_rel)
         assert got.side_measured == want.side_measured
         if want.side_measured:

@@ -85,7 +85,7 @@ def test_side_by_side_fillets_across_lanes_split_into_two_blobs_and_tracks(overl
     scene = TopScene(fillets)
     ids_per_lane: dict[int, set[int]] = {0: set(), 1: set()}
     for i in range(8):
-        update = tracker.update(segment_depth(scene.render(i / FPS)[1], scene.background_depth()))
+        update = tracker.update(segment_depth(scene.render(i / FPS)[1], scene.background_depth()), i / FPS)
         assert len(update.active) == 2 and not update.ended
         for track in update.active:
             ids_per_lane[track.lane].add(track.track_id)

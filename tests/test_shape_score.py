@@ -268,6 +268,21 @@ def test_a_degenerate_frame_in_the_window_is_counted_but_not_scored():
     assert result.phi == pytest.approx(plain.phi, abs=1e-9)
 
 
+def test_a_burst_of_frames_lost_at_the_edge_leaves_the_fillet_unscored_not_misgraded():
+    contours = translating(80)
+    closes, plain, _ = run_evaluator(contours)
+    stamps = list(range(80))
+    kept = [i for i in stamps if not closes - 1 <= i <= closes + 3]  # 5 frames lost: the close comes 4 frames late
+    evaluator = ShapeEvaluator(EDGE)
+    results = [evaluator.update(contours[i], i / FPS) for i in kept]
+    (late,) = [r for r in results if r is not None]
+    assert late.status == STATUS_UNSCORED and late.reason.startswith("frames lost at the roller edge")
+    one_lost = ShapeEvaluator(EDGE)  # one frame lost just before the close: still scored
+    results = [one_lost.update(contours[i], i / FPS) for i in stamps if i != closes]
+    (scored,) = [r for r in results if r is not None]
+    assert plain.status == scored.status == STATUS_SCORED
+
+
 def test_unscored_when_the_track_starts_past_the_edge():
     evaluator = ShapeEvaluator(EDGE)
     result = evaluator.update(translating(1, start_lead_v=EDGE + 5.0)[0], 0.0)

@@ -74,7 +74,7 @@ def test_ids_stable_and_lanes_right_over_50_frames_of_several_fillets():
     for i in range(50):
         t = i / FPS
         blobs = segment_depth(scene.render(t)[1], background)
-        update = tracker.update(blobs)
+        update = tracker.update(blobs, t)
         ended += [track.track_id for track in update.ended]
         masks = fillet_masks(fillets, t)
         for k, m in enumerate(masks):
@@ -102,54 +102,63 @@ def test_ids_stable_and_lanes_right_over_50_frames_of_several_fillets():
 
 def test_track_ends_after_max_unseen_frames_exactly_once():
     tracker = CentroidTracker(max_unseen=5)
-    for v in (100, 110, 120):
-        update = tracker.update([square_blob(300, v)])
+    for i, v in enumerate((100, 110, 120)):
+        update = tracker.update([square_blob(300, v)], i / FPS)
     (track,) = update.active
     for missed in range(1, 5):
-        update = tracker.update([])
+        update = tracker.update([], (2 + missed) / FPS)
         assert [t.unseen for t in update.active] == [missed] and not update.ended
         assert update.active[0].blob.centroid == (300.0, 120.0)  # stale blob kept
-    update = tracker.update([])
+    update = tracker.update([], 7 / FPS)
     assert update.active == [] and [t.track_id for t in update.ended] == [track.track_id]
     assert update.ended[0].unseen == 5
-    assert tracker.update([]) == TrackUpdate(active=[], ended=[])
+    assert tracker.update([], 8 / FPS) == TrackUpdate(active=[], ended=[])
 
 
 def test_new_blobs_open_new_tracks_and_ids_are_never_reused():
     tracker = CentroidTracker(max_distance_px=40.0, max_unseen=2)
-    first = tracker.update([square_blob(100, 100)]).active[0].track_id
-    update = tracker.update([square_blob(100, 108), square_blob(400, 100)])  # far beyond the gate: new track
+    first = tracker.update([square_blob(100, 100)], 0.0).active[0].track_id
+    update = tracker.update([square_blob(100, 108), square_blob(400, 100)], 1 / FPS)  # beyond the gate: new track
     assert [t.track_id for t in update.active] == [first, first + 1]
     assert update.active[0].age == 2 and update.active[1].age == 1
-    tracker.update([])
-    update = tracker.update([])
+    tracker.update([], 2 / FPS)
+    update = tracker.update([], 3 / FPS)
     assert sorted(t.track_id for t in update.ended) == [first, first + 1]
-    reopened = tracker.update([square_blob(100, 116)]).active
+    reopened = tracker.update([square_blob(100, 116)], 4 / FPS).active
     assert [t.track_id for t in reopened] == [first + 2]
     tracker.reset()
-    assert tracker.update([square_blob(100, 116)]).active[0].track_id == first + 3
+    assert tracker.update([square_blob(100, 116)], 5 / FPS).active[0].track_id == first + 3
 
 
-def test_prediction_bridges_missed_frames():
+def test_prediction_bridges_frames_the_segmenter_saw_empty():
     tracker = CentroidTracker(max_distance_px=20.0)
-    for v in (100, 110, 120):
-        (track,) = tracker.update([square_blob(200, v)]).active
-    tracker.update([])
-    tracker.update([])
-    (again,) = tracker.update([square_blob(200, 150)]).active  # 30 px from the last sighting, 0 from prediction
+    for i, v in enumerate((100, 110, 120)):
+        (track,) = tracker.update([square_blob(200, v)], i / FPS).active
+    tracker.update([], 3 / FPS)
+    tracker.update([], 4 / FPS)
+    (again,) = tracker.update([square_blob(200, 150)], 5 / FPS).active  # 30 px from the last sighting, 0 predicted
     assert again.track_id == track.track_id and again.unseen == 0
-    assert again.velocity == pytest.approx((0.0, 10.0))
+    assert again.velocity == pytest.approx((0.0, 10.0 * FPS))
+
+
+def test_prediction_bridges_frames_that_never_arrived():
+    """A burst of frames lost before the segmenter (camera, network) is timed by the stamps, not by updates."""
+    tracker = CentroidTracker(max_distance_px=20.0)
+    for i, v in enumerate((100, 110, 120)):
+        (track,) = tracker.update([square_blob(200, v)], i / FPS).active
+    (again,) = tracker.update([square_blob(200, 200)], 10 / FPS).active  # 8 frames lost: 80 px on
+    assert again.track_id == track.track_id and again.age == 4
 
 
 def test_stale_track_ghost_does_not_steal_a_live_tracks_blob():
     """A fillet falling off the edge moves backwards in the image; its extrapolated ghost must not take over."""
     tracker = CentroidTracker(max_distance_px=40.0, max_unseen=15)
     for i in range(3):
-        update = tracker.update([square_blob(300, 300 - 2 * i), square_blob(300, 200 + 6 * i)])
+        update = tracker.update([square_blob(300, 300 - 2 * i), square_blob(300, 200 + 6 * i)], i / FPS)
     ghost, live = (t.track_id for t in sorted(update.active, key=lambda t: -t.blob.centroid[1]))
     for i in range(3, 13):
         v = 200 + 6 * i + (3 if i == 12 else 0)  # at frame 12 the ghost's prediction (276) is nearer than live's
-        update = tracker.update([square_blob(300, v)])
+        update = tracker.update([square_blob(300, v)], i / FPS)
         matched = [t.track_id for t in update.active if t.unseen == 0]
         assert matched == [live], f"frame {i}"
     assert ghost in [t.track_id for t in update.active]
@@ -158,12 +167,12 @@ def test_stale_track_ghost_does_not_steal_a_live_tracks_blob():
 def test_lane_from_the_mean_column():
     tracker = CentroidTracker(lane_layout=LAYOUT3)
     blobs = [square_blob(LAYOUT3.lane_center_u(lane) + offset, 100) for lane, offset in ((0, 25), (1, -25), (2, 10))]
-    update = tracker.update(blobs)
+    update = tracker.update(blobs, 0.0)
     assert {round(t.blob.centroid[0]): t.lane for t in update.active} == {
         round(b.centroid[0]): lane for b, lane in zip(blobs, (0, 1, 2))}
     assert LAYOUT3.lane_center_u(0) > LAYOUT3.lane_center_u(1) > LAYOUT3.lane_center_u(2)  # lane 0 on the right
     assert LAYOUT3.lane_of_u(10_000) == 0 and LAYOUT3.lane_of_u(-10_000) == 2  # clamped
-    no_layout = CentroidTracker().update([square_blob(100, 100)]).active[0]
+    no_layout = CentroidTracker().update([square_blob(100, 100)], 0.0).active[0]
     assert no_layout.lane == -1
     assert lane_center_u(1, DEFAULT_TOP_K, TOP_CAMERA_HEIGHT_M, 3, 0.16) == pytest.approx(DEFAULT_TOP_K[2])
 

@@ -198,7 +198,7 @@ class _TopView:
         if self.camera.drop(self.rng):
             return
         noisy = self.camera.depth(depth, self.rng)
-        update = self.tracker.update(segment_depth(noisy, self.background.depth, self.segmentation))
+        update = self.tracker.update(segment_depth(noisy, self.background.depth, self.segmentation), now)
         observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen) for t in update.active]
         for graded in self.grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
             self.results.setdefault(graded.lane, _shape_row(graded))

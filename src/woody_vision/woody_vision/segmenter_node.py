@@ -21,6 +21,7 @@ from std_msgs.msg import Empty
 from woody_common import topics
 from woody_common.line import LANE_PITCH_M, LANES, TOP_CAMERA_HEIGHT_M
 from woody_common.ros_params import declare, run_node
+from woody_common.stamps import stamp_to_seconds
 from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 from woody_vision.camera_model import LaneLayout
 from woody_vision.frame_checks import FrameChecker, FrameError
@@ -121,7 +122,7 @@ class Segmenter(Node):
             self.tracks_pub.publish(out)  # every depth frame is answered: a paced line_sim waits for it
             return
         blobs = segment_depth(depth, self.background.depth, self.params)
-        update = self.tracker.update(blobs)
+        update = self.tracker.update(blobs, stamp_to_seconds(msg.header.stamp))
         out.ended_ids = [t.track_id for t in update.ended]
         for track in update.active:
             blob = track.blob

@@ -19,6 +19,11 @@ the leading edge is the contour's max v, the trailing edge its min v):
    "Hu Mo. Score" and "Sol. Diff." columns, each term's own maximum;
 4. the window closes on the first frame where the virtual centroid (trailing
    edge + locked offset) is at or past the edge; that frame is scored too.
+   If that frame is more than ``LATE_CLOSE_FRAMES`` frames of the fillet's own
+   approach speed past the point (frames lost in a burst around the edge, a
+   real camera's or network's dropped frames), it shows a fillet already
+   falling off and would score it far too high: the result is unscored
+   instead of wrong.
 
 Why the cut is fixed by the reference and not re-found per frame (as the seed
 system does): the segmenter thresholds height above the empty scene, and past
@@ -58,6 +63,10 @@ REASON_STARTED_PAST_EDGE = "no reference: track started with its leading edge at
 REASON_LOST_BEFORE_EDGE = "track ended before its body reached the roller edge"
 REASON_LOST_IN_WINDOW = "track ended before the evaluation window closed"
 REASON_DEGENERATE = "degenerate reference contour"
+REASON_LATE_CLOSE = "frames lost at the roller edge: the window closed {:.0f} px past the fillet's centroid"
+LATE_CLOSE_FRAMES = 2.5
+"""How far (in frames of the fillet's approach speed) the closing frame may lie past the centroid crossing.
+With every frame it is under one frame; a lost frame or two stays within this."""
 
 
 def fill_rows(contour: np.ndarray) -> tuple[np.ndarray, int, int]:
@@ -228,6 +237,8 @@ class ShapeEvaluator:
         self._reference: ShapeReference | None = None
         self._trace: list[FrameScore] = []
         self._last_stamp: float | None = None
+        self._approach: list[tuple[float, float]] = []
+        """(stamp, leading row) of the flat frames: the fillet's own speed and frame interval in the image."""
 
     @property
     def done(self) -> bool:
@@ -243,6 +254,7 @@ class ShapeEvaluator:
         if self._phase is _Phase.APPROACHING:
             if float(points[:, 1].max()) < self.edge_row - self.reference_margin_px:
                 self._last_flat, self._last_flat_stamp = points, stamp
+                self._approach.append((stamp, float(points[:, 1].max())))
                 return None
             if self._last_flat is None:
                 return self._finish(STATUS_UNSCORED, REASON_STARTED_PAST_EDGE)
@@ -256,9 +268,23 @@ class ShapeEvaluator:
         if trailing + reference.length_px < self.edge_row:
             return None  # the rigid body front has not reached the edge yet: the window is not open
         self._score(clip_body(points, trailing, reference.length_px), stamp)
-        if trailing + reference.centroid_offset_px >= self.edge_row:
+        overshoot = trailing + reference.centroid_offset_px - self.edge_row
+        if overshoot >= 0.0:
+            if overshoot > LATE_CLOSE_FRAMES * self._advance_per_frame():
+                return self._finish(STATUS_UNSCORED, REASON_LATE_CLOSE.format(overshoot))
             return self._finish(STATUS_SCORED, "")
         return None
+
+    def _advance_per_frame(self) -> float:
+        """Rows the fillet moved per camera frame while flat (inf when too few frames tell)."""
+        if len(self._approach) < 2:
+            return math.inf
+        stamps, rows = np.array(self._approach).T
+        steps = np.diff(stamps)
+        steps = steps[steps > 0]
+        if not steps.size or stamps[-1] <= stamps[0]:
+            return math.inf
+        return float((rows[-1] - rows[0]) / (stamps[-1] - stamps[0]) * steps.min())
 
     def finish(self) -> ShapeResult | None:
         """The track ended: the unscored result, or None if a result was already produced."""

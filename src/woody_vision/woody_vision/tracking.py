@@ -5,8 +5,11 @@ Blobs are matched to tracks with a minimum-total-distance assignment
 centroid and the blob centroids, gated by ``max_distance_px``; within the gate
 a track seen more recently is preferred over a staler one (each frame unseen
 costs 2 × the gate in the assignment), like a matching cascade. The prediction
-is the last centroid plus the last observed per-frame motion, so a track that
-missed a few frames is still found downstream. Unmatched blobs open tracks with
+is the last centroid plus the last observed motion times the time since that
+sighting, taken from the frames' stamps: a frame the camera or the network
+dropped never reaches the tracker, so counting updates would predict one
+frame's motion across a gap of several, and a burst of 5–8 lost frames split
+every fillet in view into two unscored tracks. Unmatched blobs open tracks with
 new, never reused integer ids; a track ends once it has gone ``max_unseen``
 consecutive frames without a match (paper: 15).
 """
@@ -25,7 +28,8 @@ from woody_vision.segmentation import Blob
 DEFAULT_MAX_UNSEEN = 15
 """Frames a track may go unmatched before it ends (paper: 15)."""
 DEFAULT_MAX_DISTANCE_PX = 40.0
-"""Association gate: belt motion is 8–11 px/frame at 30 Hz; neighbouring fillets' centroids are ≥ ~75 px apart."""
+"""Association gate around the predicted centroid (belt motion is 8–11 px/frame at 30 Hz; neighbouring fillets'
+centroids are ≥ ~75 px apart)."""
 NO_LANE = -1
 
 
@@ -43,7 +47,9 @@ class Track:
     lane: int
     """Lane from the mean centroid column over the track's matches; -1 without a lane layout."""
     velocity: tuple[float, float]
-    """Last observed centroid motion in px per frame (u, v)."""
+    """Last observed centroid motion in px per second (u, v)."""
+    stamp: float
+    """Time (s) of the frame ``blob`` is from."""
 
 
 @dataclass(frozen=True)
@@ -83,16 +89,16 @@ class CentroidTracker:
         self._sum_u.clear()
         self._hits.clear()
 
-    def update(self, blobs: Sequence[Blob]) -> TrackUpdate:
-        """Associate this frame's blobs with the tracks; open, age and end tracks."""
+    def update(self, blobs: Sequence[Blob], stamp: float) -> TrackUpdate:
+        """Associate the blobs of the frame taken at ``stamp`` (s) with the tracks; open, age and end tracks."""
         ids = list(self._tracks)
-        matches = self._associate(ids, blobs)
+        matches = self._associate(ids, blobs, stamp)
         matched_blobs = set(matches.values())
         ended: list[Track] = []
         for track_id in ids:
             track = self._tracks[track_id]
             if track_id in matches:
-                self._tracks[track_id] = self._matched(track, blobs[matches[track_id]])
+                self._tracks[track_id] = self._matched(track, blobs[matches[track_id]], stamp)
                 continue
             track = replace(track, age=track.age + 1, unseen=track.unseen + 1)
             if track.unseen >= self.max_unseen:
@@ -102,22 +108,17 @@ class CentroidTracker:
                 self._tracks[track_id] = track
         for index, blob in enumerate(blobs):
             if index not in matched_blobs:
-                self._open(blob)
+                self._open(blob, stamp)
         return TrackUpdate(active=[self._tracks[i] for i in sorted(self._tracks)], ended=ended)
 
-    def _associate(self, ids: list[int], blobs: Sequence[Blob]) -> dict[int, int]:
+    def _associate(self, ids: list[int], blobs: Sequence[Blob], stamp: float) -> dict[int, int]:
         """Track id -> blob index for the minimum-distance assignment within the gate."""
         if not ids or not blobs:
             return {}
-        predicted = np.array(
-            [
-                (
-                    t.blob.centroid[0] + t.velocity[0] * (t.unseen + 1),
-                    t.blob.centroid[1] + t.velocity[1] * (t.unseen + 1),
-                )
-                for t in (self._tracks[i] for i in ids)
-            ]
-        )
+        tracks = [self._tracks[i] for i in ids]
+        elapsed = np.array([max(stamp - t.stamp, 0.0) for t in tracks])
+        velocity = np.array([t.velocity for t in tracks])
+        predicted = np.array([t.blob.centroid for t in tracks]) + velocity * elapsed[:, None]
         centroids = np.array([b.centroid for b in blobs], dtype=float)
         distance = np.linalg.norm(predicted[:, None, :] - centroids[None, :, :], axis=2)
         # Recently seen tracks come first: a stale track's extrapolated ghost (e.g. of a fillet that fell off
@@ -128,11 +129,11 @@ class CentroidTracker:
         rows, cols = linear_sum_assignment(gated)
         return {ids[r]: int(c) for r, c in zip(rows, cols) if distance[r, c] <= self.max_distance_px}
 
-    def _matched(self, track: Track, blob: Blob) -> Track:
-        frames = track.unseen + 1
-        velocity = (
-            (blob.centroid[0] - track.blob.centroid[0]) / frames,
-            (blob.centroid[1] - track.blob.centroid[1]) / frames,
+    def _matched(self, track: Track, blob: Blob, stamp: float) -> Track:
+        elapsed = stamp - track.stamp
+        velocity = track.velocity if elapsed <= 0.0 else (
+            (blob.centroid[0] - track.blob.centroid[0]) / elapsed,
+            (blob.centroid[1] - track.blob.centroid[1]) / elapsed,
         )
         self._sum_u[track.track_id] += blob.centroid[0]
         self._hits[track.track_id] += 1
@@ -143,15 +144,17 @@ class CentroidTracker:
             unseen=0,
             lane=self._lane(track.track_id),
             velocity=velocity,
+            stamp=stamp,
         )
 
-    def _open(self, blob: Blob) -> None:
+    def _open(self, blob: Blob, stamp: float) -> None:
         track_id = self._next_id
         self._next_id += 1
         self._sum_u[track_id] = blob.centroid[0]
         self._hits[track_id] = 1
         self._tracks[track_id] = Track(
-            track_id=track_id, blob=blob, age=1, unseen=0, lane=self._lane(track_id), velocity=(0.0, 0.0)
+            track_id=track_id, blob=blob, age=1, unseen=0, lane=self._lane(track_id), velocity=(0.0, 0.0),
+            stamp=stamp,
         )
 
     def _lane(self, track_id: int) -> int:
