@@ -9,7 +9,7 @@ import pytest
 
 from woody_vision.grader_core import SIDE_MATCH_SLACK_S, FilletGrader, GradedFillet, TrackObservation
 from woody_vision.grading import GradingRules
-from woody_vision.shape_score import REASON_LOST_IN_WINDOW, STATUS_SCORED
+from woody_vision.shape_score import REASON_LOST_IN_WINDOW, REASON_STARTED_PAST_EDGE, STATUS_SCORED
 from woody_vision.side_view import SideMeasurement
 from woody_vision.synthetic import teardrop_polygon
 
@@ -96,6 +96,18 @@ def test_unscored_verdict_when_the_track_ends_in_the_window():
     assert verdict.label == "unscored" and verdict.grade == "" and not verdict.scored
     assert verdict.shape.reason == REASON_LOST_IN_WINDOW and verdict.lane == WATCHED
     assert grader.release(1e9) == []
+
+
+def test_a_piece_split_off_past_the_edge_gets_no_verdict_but_a_fillet_appearing_there_alone_does():
+    grader = FilletGrader(EDGE, GradingRules(threshold=1.0))
+    shapes = contours(90)
+    piece = np.array([[290, 205], [310, 205], [310, 225], [290, 225]], np.int32)
+    for i, contour in enumerate(shapes[:30]):  # seen flat, then at the edge: its reference is locked
+        assert grader.on_tracks(i / FPS, [TrackObservation(1, 0, contour)]) == []
+    assert grader.on_tracks(30 / FPS, [TrackObservation(1, 0, shapes[30]), TrackObservation(2, 0, piece)]) == []
+    assert grader.fragments == 1
+    ((_, alone),) = feed(FilletGrader(EDGE), 3, 1, [piece])  # nothing in its lane: unscored, but heard
+    assert alone.label == "unscored" and alone.shape.reason == REASON_STARTED_PAST_EDGE
 
 
 def test_unseen_observations_do_not_feed_the_evaluator():

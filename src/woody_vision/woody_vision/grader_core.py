@@ -20,7 +20,7 @@ import numpy as np
 
 from woody_common.calibration import load_calibration
 from woody_vision.grading import GradingRules
-from woody_vision.shape_score import STATUS_SCORED, ShapeEvaluator, ShapeResult
+from woody_vision.shape_score import REASON_STARTED_PAST_EDGE, STATUS_SCORED, ShapeEvaluator, ShapeResult
 from woody_vision.side_view import SideMeasurement
 
 DEFAULT_SIDE_WAIT_S = 0.8
@@ -84,6 +84,8 @@ class FilletGrader:
         self._pending: list[_Pending] = []
         self._side: list[SideMeasurement] = []
         self.now = -math.inf
+        self.fragments = 0
+        """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_lane_has_approached`)."""
 
     def on_tracks(self, stamp: float, tracks: Sequence[TrackObservation],
                   ended_ids: Iterable[int] = ()) -> list[GradedFillet]:
@@ -132,6 +134,9 @@ class FilletGrader:
 
     def _decide(self, track_id: int, result: ShapeResult) -> list[GradedFillet]:
         lane = self._lanes.get(track_id, -1)
+        if result.reason == REASON_STARTED_PAST_EDGE and self._lane_has_approached(lane, track_id):
+            self.fragments += 1
+            return []
         if result.status == STATUS_SCORED and math.isfinite(result.phi):
             classification = self.rules.classify(result.phi)
             graded = GradedFillet(track_id, lane, result, classification.label, classification.grade or "")
@@ -141,6 +146,17 @@ class FilletGrader:
             return [graded]
         self._pending.append(_Pending(graded, deadline=(result.stamp or self.now) + self.side_wait_s))
         return []
+
+    def _lane_has_approached(self, lane: int, track_id: int) -> bool:
+        """Whether another live track of ``lane`` was seen flat before the edge.
+
+        A track that first appears past the edge next to such a fillet is a
+        piece of it split off by the segmentation (a noisy camera's tip going
+        over the edge), not a fillet of its own: it gets no verdict, so the
+        gate and the sweep hear only the whole fillet's.
+        """
+        return any(self._lanes.get(other) == lane and evaluator.referenced
+                   for other, evaluator in self._evaluators.items() if other != track_id)
 
     def _match_side(self, graded: GradedFillet) -> SideMeasurement | None:
         closing = graded.shape.stamp

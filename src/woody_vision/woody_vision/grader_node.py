@@ -200,7 +200,9 @@ class Grader(Node):
         return msg
 
     def close(self) -> None:
-        print(f"[grader] published {self.published} verdicts", flush=True)
+        pieces = self.core.fragments if self.core is not None else 0
+        print(f"[grader] published {self.published} verdicts; {pieces} tracks were pieces split off a fillet "
+              "past the edge (no verdict)", flush=True)
 
 
 def _finite_or_nan(value: float) -> float:

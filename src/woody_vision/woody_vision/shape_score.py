@@ -245,6 +245,11 @@ class ShapeEvaluator:
         """True once the result has been produced."""
         return self._phase is _Phase.DONE
 
+    @property
+    def referenced(self) -> bool:
+        """True once the fillet was seen flat before the edge and its reference is locked."""
+        return self._reference is not None
+
     def update(self, contour: np.ndarray, stamp: float) -> ShapeResult | None:
         """Feed this frame's full contour; returns the result on the frame it is decided."""
         if self._phase is _Phase.DONE:
