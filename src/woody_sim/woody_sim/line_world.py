@@ -558,7 +558,7 @@ class LineWorld:
         fillet.state = np.fromiter(itertools.chain.from_iterable(rows), float, 13 * len(rows)).reshape(-1, 13)
 
     def _remove_finished(self) -> None:
-        """Drop fillets that blew up (too fast or non-finite: listed in ``blown_up``), fell, left the line or got stuck."""
+        """Drop fillets that blew up (too fast or non-finite: see ``blown_up``), fell, left the line or got stuck."""
         for fid, fillet in list(self._fillets.items()):
             state = fillet.state
             if not np.isfinite(state).all() or np.abs(state[:, 7:10]).max() > BLOWUP_SPEED:
