@@ -24,6 +24,9 @@ Choices that are not pybullet defaults (measurements in docs/physics.md):
   contact the drive lets go and gravity takes over. Belt and roller are static
   bodies without friction (friction against a static belt would brake the
   fillet the real belt carries), so the drive alone sets the speed.
+* **Inertia floor on the hinge axis.** No segment's inertia about y is below
+  ``PhysicsConfig.inertia_floor`` (10 %) of the mean segment's: the thin end
+  slices otherwise whip under a roller contact (:func:`segment_inertias`).
 * **Flat-belt fast path.** Bullet's articulated contact cost grows with
   (contacts x links), and a fillet lying flat on the belt at line speed is a
   rigid translation anyway. A fillet therefore rides the belt as an exact
@@ -202,7 +205,7 @@ def segment_inertias(model: FilletModel, floor: float) -> np.ndarray:
     is ~1e-3 of a mid slice's. When such a slice carries the roller contact of
     a heavy chain, pybullet's iterative contact solver cannot balance it against
     its neighbours within a step and the tip whips (hinge rates hit Bullet's
-    100 rad/s clamp, the chain is thrown: docs/physics.md, "Blow-ups"). The
+    100 rad/s clamp, the chain is thrown: docs/physics.md, "Stability"). The
     floor is an armature on those hinges; mass, centre of mass and the other
     axes are unchanged.
     """
