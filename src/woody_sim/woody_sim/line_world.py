@@ -24,6 +24,9 @@ Choices that are not pybullet defaults (measurements in docs/physics.md):
   contact the drive lets go and gravity takes over. Belt and roller are static
   bodies without friction (friction against a static belt would brake the
   fillet the real belt carries), so the drive alone sets the speed.
+* **Inertia floor on the hinge axis.** No segment's inertia about y is below
+  ``PhysicsConfig.inertia_floor`` (10 %) of the mean segment's: the thin end
+  slices otherwise whip under a roller contact (:func:`segment_inertias`).
 * **Flat-belt fast path.** Bullet's articulated contact cost grows with
   (contacts x links), and a fillet lying flat on the belt at line speed is a
   rigid translation anyway. A fillet therefore rides the belt as an exact
@@ -57,9 +60,9 @@ CONTACT_DISTANCE = 0.001
 PAST_ROLLER_X = 1.5
 """A fillet whose centre of mass is this far (m) downstream of the roller edge has left the line."""
 DYNAMIC_TIMEOUT = 10.0
+"""A chain still on the line this long (s) after leaving the belt fast path is removed (stuck), so runs stay bounded."""
 BLOWUP_SPEED = 12.0
 """m/s no segment reaches on this line (free fall past the roller stays under ~4 m/s): faster is a numerical blow-up."""
-"""A chain still on the line this long (s) after leaving the belt fast path is removed (stuck), so runs stay bounded."""
 
 
 @dataclass(frozen=True)
@@ -83,6 +86,9 @@ class PhysicsConfig:
     """Coulomb cap once the needed force exceeds the static cap (seed: dynamic 0.6)."""
     normal_force_tau: float = 0.01
     """Time constant (s) of the low-pass filter on the contact normal force that caps the drive."""
+    inertia_floor: float = 0.1
+    """Least inertia of a segment about its hinge axis, as a fraction of the segments' mean (an armature on the
+    thin tip slices, without which pybullet's contact solver whips them; see :func:`segment_inertias`)."""
 
     def __post_init__(self) -> None:
         if not 1e-7 <= self.dt <= 0.02:
@@ -91,6 +97,8 @@ class PhysicsConfig:
             raise ValueError(f"number of segments N must be an integer >= 2, got {self.n_segments}")
         if not self.damping >= 0.0:
             raise ValueError(f"damping must be >= 0, got {self.damping}")
+        if not 0.0 <= self.inertia_floor <= 1.0:
+            raise ValueError(f"inertia_floor must be within 0..1, got {self.inertia_floor}")
         if self.activation_margin is not None and not self.activation_margin >= 0.0:
             raise ValueError(f"activation_margin must be >= 0 or None, got {self.activation_margin}")
 
@@ -188,6 +196,25 @@ def _capped_drive(velocity: np.ndarray, normal: np.ndarray, speed: float, mass_r
     if size <= cfg.friction_static * normal_force:
         return force
     return force * (cfg.friction_dynamic * normal_force / size)
+
+
+def segment_inertias(model: FilletModel, floor: float) -> np.ndarray:
+    """(N, 3) principal inertias (kg m^2) of the segment boxes; the one about y at least ``floor`` x their mean.
+
+    A tapering end slice is a thin, light box: its inertia about the hinge axis
+    is ~1e-3 of a mid slice's. When such a slice carries the roller contact of
+    a heavy chain, pybullet's iterative contact solver cannot balance it against
+    its neighbours within a step and the tip whips (hinge rates hit Bullet's
+    100 rad/s clamp, the chain is thrown: docs/physics.md, "Stability"). The
+    floor is an armature on those hinges; mass, centre of mass and the other
+    axes are unchanged.
+    """
+    m = model.masses
+    size2 = (2.0 * model.box_half_extents) ** 2
+    inertia = np.column_stack([size2[:, 1] + size2[:, 2], size2[:, 0] + size2[:, 2], size2[:, 0] + size2[:, 1]])
+    inertia *= m[:, None] / 12.0
+    inertia[:, 1] = np.maximum(inertia[:, 1], floor * inertia[:, 1].mean())
+    return inertia
 
 
 def hinge_state(state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -358,7 +385,7 @@ class LineWorld:
         c = self._client
         model = fillet.model
         n = model.n_segments
-        centers, half, hinges = model.box_centers, model.box_half_extents, model.joint_positions
+        centers, hinges = model.box_centers, model.joint_positions
         shapes = self._collision_shapes(fillet.mesh, model)
         origin = fillet.state[0, :3] - centers[0]
         parents = [centers[0]] + [hinges[i - 2] for i in range(2, n)]
@@ -380,13 +407,11 @@ class LineWorld:
             linkJointAxis=[[0.0, 1.0, 0.0]] * (n - 1),
             physicsClientId=c,
         )
+        inertias = segment_inertias(model, self.config.inertia_floor)
         for link in range(-1, n - 1):
-            m = float(model.masses[link + 1])
-            sx, sy, sz = 2.0 * half[link + 1]
-            inertia = [m * (sy**2 + sz**2) / 12.0, m * (sx**2 + sz**2) / 12.0, m * (sx**2 + sy**2) / 12.0]
             limits = {} if link < 0 else {"jointLowerLimit": -JOINT_LIMIT, "jointUpperLimit": JOINT_LIMIT}
             p.changeDynamics(
-                body, link, localInertiaDiagonal=inertia, lateralFriction=1.0, restitution=0.0,
+                body, link, localInertiaDiagonal=inertias[link + 1].tolist(), lateralFriction=1.0, restitution=0.0,
                 linearDamping=0.0, angularDamping=0.0, physicsClientId=c, **limits,
             )
         # pybullet gives every joint a velocity motor that acts as friction; switch them off
@@ -536,15 +561,14 @@ class LineWorld:
         fillet.state = np.fromiter(itertools.chain.from_iterable(rows), float, 13 * len(rows)).reshape(-1, 13)
 
     def _remove_finished(self) -> None:
-        """Drop fillets that fell below ``remove_z``, left the line, got stuck or blew up (non-finite state)."""
+        """Drop fillets that blew up (too fast or non-finite: see ``blown_up``), fell, left the line or got stuck."""
         for fid, fillet in list(self._fillets.items()):
             state = fillet.state
-            if np.isfinite(state).all() and np.abs(state[:, 7:10]).max() > BLOWUP_SPEED:
+            if not np.isfinite(state).all() or np.abs(state[:, 7:10]).max() > BLOWUP_SPEED:
                 self.blown_up.append(fid)
                 self.remove(fid)
             elif (
-                not np.isfinite(state).all()
-                or bool((state[:, 2] < self.geometry.remove_z).all())
+                bool((state[:, 2] < self.geometry.remove_z).all())
                 or self._com(fillet)[0] > PAST_ROLLER_X
                 or self.time - fillet.activation_time > DYNAMIC_TIMEOUT
             ):
