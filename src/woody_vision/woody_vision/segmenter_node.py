@@ -6,7 +6,8 @@ empty-belt background is learned from the first frames (publish on
 line so a camera hiccup never takes the node down or corrupts its tracks.
 With ``color_threshold`` > 0 the outline comes from the registered colour
 frame of the same stamp (a depth frame waits for it until the next depth
-frame arrives; without one it is segmented from depth alone, with a warning).
+frame arrives; one whose colour never came is skipped like a lost frame, so
+no depth-only outline, which is another shape, enters a fillet's score).
 """
 
 from __future__ import annotations
@@ -137,7 +138,7 @@ class Segmenter(Node):
             if self.tracker is not None:
                 self.tracker.reset()
         if self.params.color_threshold and _stamp_key(msg) not in self.colors:
-            if self.pending is not None:  # its colour frame never came: depth alone
+            if self.pending is not None:  # its colour frame never came: skipped
                 self._segment(*self.pending)
             self.pending = (msg, depth)
             return
@@ -147,6 +148,9 @@ class Segmenter(Node):
         """Segment and track one depth frame (with its colour frame, when the outline comes from colour)."""
         color = self._color_for(msg, depth.shape)
         out = FilletTrackArray(header=msg.header, image_width=msg.width, image_height=msg.height)
+        if self.params.color_threshold and color is None:
+            self.tracks_pub.publish(out)  # answered (a paced line_sim waits for it), but nothing tracked
+            return
         if not self.background.ready or self.tracker is None:
             if not self.background.ready:
                 self.background.add(depth, color)
@@ -170,7 +174,7 @@ class Segmenter(Node):
             self._publish_debug(msg, update.active)
 
     def _color_for(self, msg: Image, shape: tuple[int, ...]) -> np.ndarray | None:
-        """The colour frame of the depth frame's stamp at its size, or None (one throttled warning) without one."""
+        """The colour frame of the depth frame's stamp at its size, or None (a throttled warning) without one."""
         if not self.params.color_threshold:
             return None
         color_msg = self.colors.pop(_stamp_key(msg), None)
@@ -181,7 +185,7 @@ class Segmenter(Node):
         except FrameError as exc:
             reason = str(exc)
         self.without_color += 1
-        self.get_logger().warning(f"{reason}: outline from depth alone ({self.without_color} frames so far)",
+        self.get_logger().warning(f"{reason}: depth frame skipped ({self.without_color} so far)",
                                   throttle_duration_sec=5.0)
         return None
 
@@ -218,7 +222,7 @@ class Segmenter(Node):
 
     def close(self) -> None:
         print(f"[segmenter] {self.frames} depth frames received, {self.checker.rejected} rejected"
-              + (f", {self.without_color} segmented without colour" if self.params.color_threshold else ""),
+              + (f", {self.without_color} skipped without their colour frame" if self.params.color_threshold else ""),
               flush=True)
 
 
