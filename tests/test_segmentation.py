@@ -271,7 +271,8 @@ def test_colour_draws_the_outline_that_depth_noise_frays():
 
     assert distance(from_color) < 0.2 * distance(from_depth)
     off = SegmentationParams(**dict(REAL_CAMERA_FILTERS, color_threshold=0.0))
-    assert outlines(segment_depth(depth, background, off, color, color_bg)) == outlines(segment_depth(depth, background, off))
+    without = segment_depth(depth, background, off)
+    assert outlines(segment_depth(depth, background, off, color, color_bg)) == outlines(without)
 
 
 def test_colour_counts_only_near_the_depth_mask():
