@@ -135,6 +135,7 @@ class Segmenter(Node):
         if self.checker.restarted:
             self.get_logger().warning("camera restarted (stamp went back or the size changed): relearning background")
             self.background.reset()
+            self.pending = None
             if self.tracker is not None:
                 self.tracker.reset()
         if self.params.color_threshold and _stamp_key(msg) not in self.colors:
