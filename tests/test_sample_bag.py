@@ -5,6 +5,7 @@ Replaying it into the vision nodes reproduces its verdicts."""
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 import sys
 
@@ -147,6 +148,19 @@ def test_16uc1_depth_and_bgr8_colour_over_best_effort_give_the_same_verdicts(ros
     # Same class, lane, crossing stamp and side metrics; Φ moves (2-19 % on these three fillets) because
     # millimetre depth shifts the 5 mm height threshold by up to half a step on the fillets' thin edges.
     assert_same_verdicts(received[""], recorded_verdicts(), logs, phi_rel=0.25)
+
+
+def test_outline_from_the_registered_colour_gives_the_same_classes(ros_node, ros_domain, tmp_path):
+    """The real-camera segmentation (colour outline, REAL_CAMERA_FILTERS) on the sample: depth frames find their
+    colour frames by stamp, and each fillet keeps its class, lane and crossing (Φ is another outline's)."""
+    from woody_vision.segmentation import REAL_CAMERA_FILTERS
+
+    bag = as_a_camera_driver_sends_it(tmp_path / "driver.mcap")
+    received, logs = replay_into_vision(bag, [*CAMERA_TOPICS, COLOUR], ros_node, ros_domain, tmp_path,
+                                        dict(REAL_CAMERA_FILTERS))
+    skipped = re.search(r"(\d+) depth frames received, 0 rejected, (\d+) skipped without their colour frame", logs)
+    assert skipped and int(skipped[2]) <= 0.05 * int(skipped[1]), logs  # only colour lost over best effort
+    assert_same_verdicts(received[""], recorded_verdicts(), logs, phi_rel=1.0)
 
 
 def test_two_namespaced_lines_share_a_domain_without_crosstalk(ros_node, ros_domain, tmp_path):

@@ -225,6 +225,84 @@ def test_background_model_ignores_missing_returns():
 
 def test_segmentation_params_are_validated():
     for bad in (dict(height_threshold_m=0.0), dict(min_area_px=0), dict(open_kernel_px=-1),
-                dict(split_solidity=1.5), dict(core_ratio=1.0)):
+                dict(split_solidity=1.5), dict(core_ratio=1.0), dict(color_threshold=-1.0),
+                dict(color_search_px=-1)):
         with pytest.raises(ValueError):
             SegmentationParams(**bad)
+
+
+BELT, PINK = (58, 64, 82), (226, 150, 138)
+
+
+def outlines(blobs: list[Blob]) -> list[list]:
+    return [blob.contour.tolist() for blob in blobs]
+
+
+def dome_scene(rng: np.random.Generator, noise_m: float = 0.002) -> tuple[np.ndarray, ...]:
+    """A fillet-like dome (20 mm high, its rim tapering to the belt) under correlated depth noise, and its colour.
+
+    Returns (depth, background depth, colour, background colour, true mask)."""
+    rows, cols = np.mgrid[0:200, 0:300]
+    r2 = ((cols - 150) / 90.0) ** 2 + ((rows - 100) / 45.0) ** 2
+    truth = r2 < 1.0
+    background = np.full((200, 300), 0.75, np.float32)
+    noise = cv2.GaussianBlur(rng.standard_normal(background.shape).astype(np.float32), (0, 0), 1.5)
+    depth = background - np.where(truth, 0.02 * (1.0 - r2), 0.0).astype(np.float32)
+    depth += noise / noise.std() * np.float32(noise_m)
+    color_bg = np.empty((200, 300, 3), np.float32)
+    color_bg[:] = BELT
+    color = np.where(truth[..., None], np.float32(PINK), color_bg) + rng.normal(0.0, 3.0, color_bg.shape)
+    return depth, background, np.clip(color, 0, 255).astype(np.uint8), color_bg, truth
+
+
+def test_colour_draws_the_outline_that_depth_noise_frays():
+    """A thin rim under 2 mm of depth noise: the 5 mm cut loses the rim and frays; the colour outline is the fillet."""
+    depth, background, color, color_bg, truth = dome_scene(np.random.default_rng(3))
+    true_contour, _ = cv2.findContours(truth.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    params = SegmentationParams(**dict(REAL_CAMERA_FILTERS, color_search_px=16))  # wider than the lost rim
+    (from_depth,) = segment_depth(depth, background, params)
+    (from_color,) = segment_depth(depth, background, params, color, color_bg)
+    assert outlines(segment_depth(depth, background, params, None, color_bg)) == outlines([from_depth])
+    assert from_depth.area_px < 0.85 * truth.sum()  # the rim under the 5 mm cut is lost
+    assert from_color.area_px == pytest.approx(truth.sum(), rel=0.03)
+
+    def distance(blob):
+        return cv2.matchShapes(true_contour[0], blob.contour, cv2.CONTOURS_MATCH_I1, 0.0)
+
+    assert distance(from_color) < 0.2 * distance(from_depth)
+    off = SegmentationParams(**dict(REAL_CAMERA_FILTERS, color_threshold=0.0))
+    without = segment_depth(depth, background, off)
+    assert outlines(segment_depth(depth, background, off, color, color_bg)) == outlines(without)
+
+
+def test_colour_counts_only_near_the_depth_mask():
+    """A pink stain on the flat belt is no fillet, and one running out of a fillet ends color_search_px past it."""
+    depth, background, color, color_bg, truth = dome_scene(np.random.default_rng(4), noise_m=0.0)
+    params = SegmentationParams(**REAL_CAMERA_FILTERS)
+    (alone,) = segment_depth(depth, background, params, color, color_bg)
+    stained = color.copy()
+    stained[150:195, 10:60] = PINK  # far from the fillet
+    stained[95:105, 200:300] = PINK  # from inside the fillet out to the frame border
+    (blob,) = segment_depth(depth, background, params, stained, color_bg)
+    (depth_only,) = segment_depth(depth, background, SegmentationParams(**dict(REAL_CAMERA_FILTERS, color_threshold=0)))
+    right_end = depth_only.bbox[0] + depth_only.bbox[2] - 1
+    assert blob.bbox[0] + blob.bbox[2] - 1 == right_end + params.color_search_px
+    assert outlines([blob]) == outlines([alone])
+    with pytest.raises(ValueError, match="registered"):
+        segment_depth(depth, background, params, color[:, :-1], color_bg)
+
+
+def test_background_model_learns_the_colour_of_the_empty_belt():
+    model = BackgroundModel(frames_needed=3)
+    depth = np.full((4, 5), 0.75, np.float32)
+    for level in (10, 200, 30):
+        model.add(depth, np.full((4, 5, 3), level, np.uint8))
+    assert model.color.shape == (4, 5, 3) and np.all(model.color == 30.0)  # the median: a passer-by is ignored
+    assert BackgroundModel(1).color is None
+    without = BackgroundModel(1)
+    without.add(depth)
+    assert without.ready and without.color is None
+    with pytest.raises(ValueError, match="colour shape"):
+        BackgroundModel(1).add(depth, np.zeros((4, 4, 3), np.uint8))
+    model.reset()
+    assert model.color is None and not model.ready

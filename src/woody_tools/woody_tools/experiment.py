@@ -66,7 +66,7 @@ REAL_CAMERA_SEGMENTATION = SegmentationParams(**REAL_CAMERA_FILTERS)
 BACKGROUND_FRAMES = 5
 """Noisy empty-belt frames the background is learned from (the segmenter's default ``background_frames``)."""
 
-_RENDERERS: dict[tuple[LineGeometry, bool, bool], tuple[LineRenderer, np.ndarray | None, np.ndarray | None]] = {}
+_RENDERERS: dict[tuple[LineGeometry, bool, bool], tuple[LineRenderer, tuple | None, np.ndarray | None]] = {}
 
 
 @dataclass(frozen=True)
@@ -106,7 +106,7 @@ def _renderer(geometry: LineGeometry, top: bool, side: bool):
     key = (geometry, top, side)
     if key not in _RENDERERS:
         renderer = LineRenderer(geometry, render_top=top, render_side=side)
-        top_bg = renderer.render_top({})[1] if top else None
+        top_bg = renderer.render_top({}) if top else None
         side_bg = renderer.render_side({}) if side else None
         _RENDERERS[key] = (renderer, top_bg, side_bg)
     renderer, top_bg, side_bg = _RENDERERS[key]
@@ -147,7 +147,7 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                 next_top += top_dt * max(1, math.floor((now + 1e-9 - next_top) / top_dt) + 1)
                 if top_start_x is None or n_top or SPAWN_X + speed * now + lead_offset >= top_start_x:
                     poses = world.segment_poses()
-                    top.on_frame(renderer.render_top(poses)[1], now)
+                    top.on_frame(*renderer.render_top(poses), now)
                     n_top += 1
                     top_done = len(top.results) >= spec.lanes
             if side is not None and side.due(now):
@@ -180,25 +180,33 @@ def _spawn_lanes(world: LineWorld, renderer, spec: RunSpec, mesh: FilletMesh, ma
 class _TopView:
     """The top camera of one run as the segmenter and grader see it: sensor model, segmentation, tracking, Φ."""
 
-    def __init__(self, spec: RunSpec, geometry: LineGeometry, background_depth: np.ndarray) -> None:
+    def __init__(self, spec: RunSpec, geometry: LineGeometry, background: tuple[np.ndarray, np.ndarray]) -> None:
         top_cam = geometry.top_camera()
         layout = LaneLayout(tuple(top_cam.k.reshape(-1)), geometry.top_height, spec.lanes, geometry.lane_pitch)
         self.grader = FilletGrader(geometry.top_edge_row(), watched_lane=None)
         self.tracker = CentroidTracker(lane_layout=layout)
         self.camera, self.rng = sensor_preset(spec.sensor), np.random.default_rng(_sensor_seed(spec))
+        self.color_rng = np.random.default_rng((_sensor_seed(spec), 1))
+        """Colour noise has its own stream, so the depth noise of a run does not depend on whether colour is used."""
         self.background = BackgroundModel(1 if self.camera.ideal else BACKGROUND_FRAMES)
         self.segmentation = SegmentationParams() if self.camera.ideal else REAL_CAMERA_SEGMENTATION
         while not self.background.ready:
-            self.background.add(self.camera.depth(background_depth, self.rng))
+            self.background.add(*self._sense(*background))
         self.results: dict[int, dict] = {}
         """Lane -> its first graded fillet's row fields."""
 
-    def on_frame(self, depth: np.ndarray, now: float) -> None:
-        """One rendered depth frame through the sensor model (maybe dropped) and the vision path."""
+    def _sense(self, rgb: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The camera's depth, and its colour when the segmentation uses colour."""
+        noisy = self.camera.depth(depth, self.rng)
+        return noisy, self.camera.color(rgb, self.color_rng) if self.segmentation.color_threshold else None
+
+    def on_frame(self, rgb: np.ndarray, depth: np.ndarray, now: float) -> None:
+        """One rendered RGB-D frame through the sensor model (maybe dropped) and the vision path."""
         if self.camera.drop(self.rng):
             return
-        noisy = self.camera.depth(depth, self.rng)
-        update = self.tracker.update(segment_depth(noisy, self.background.depth, self.segmentation), now)
+        noisy, color = self._sense(rgb, depth)
+        blobs = segment_depth(noisy, self.background.depth, self.segmentation, color, self.background.color)
+        update = self.tracker.update(blobs, now)
         observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen) for t in update.active]
         for graded in self.grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
             self.results.setdefault(graded.lane, _shape_row(graded))

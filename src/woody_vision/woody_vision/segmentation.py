@@ -29,9 +29,12 @@ background is the floor and the same rim is, so a high threshold makes the outli
 the edge whether it bends or not (5 mm gave stiff real meshes a k-independent Φ of about 2; 2 mm about 1)."""
 DEFAULT_MIN_AREA_PX = 500
 """Blobs smaller than this are noise or slivers, never a fillet (paper: 500 px)."""
-REAL_CAMERA_FILTERS = {"fill_invalid_px": 4, "median_px": 5, "blur_px": 1.0, "height_threshold_m": 0.005}
+REAL_CAMERA_FILTERS = {"fill_invalid_px": 4, "median_px": 5, "blur_px": 1.0, "height_threshold_m": 0.005,
+                       "color_threshold": 20.0, "color_search_px": 8}
 """The hole filling and smoothing recommended for a real (or modelled) camera (README, "Real camera"); the
-height threshold goes back to 5 mm, since a 2 mm cut sits inside a real sensor's ~2 mm depth noise."""
+height threshold goes back to 5 mm, since a 2 mm cut sits inside a real sensor's ~2 mm depth noise, and the
+outline comes from the registered colour image (20 levels: several times a camera's colour noise, well under
+the fillet-to-belt contrast; docs/sensors.md, "Robustness")."""
 
 
 @dataclass(frozen=True)
@@ -68,6 +71,13 @@ class SegmentationParams:
     blur_px: float = 0.0
     """Gaussian σ (px) smoothing the height map after the median (0 = off): frayed contours lose solidity and
     would be split as if they were two touching fillets."""
+    color_threshold: float = 0.0
+    """Outline from the registered colour image (0 = off): near the depth mask, a pixel is fillet when its colour
+    differs from the empty belt's by more than this (8-bit levels, RGB distance). Depth noise of a few mm moves a
+    thin rim's contour by pixels; a camera's colour noise of a few levels does not."""
+    color_search_px: int = 8
+    """Colour refines the outline only within this distance (px) of the depth mask: depth decides where a fillet
+    is, so a stain, glare or shadow elsewhere never becomes one."""
 
     def __post_init__(self) -> None:
         if not self.height_threshold_m > 0.0:
@@ -80,16 +90,20 @@ class SegmentationParams:
             raise ValueError(f"split_solidity must be in (0, 1], got {self.split_solidity}")
         if not 0.0 < self.core_ratio < 1.0:
             raise ValueError(f"core_ratio must be in (0, 1), got {self.core_ratio}")
+        if self.color_threshold < 0 or self.color_search_px < 0:
+            raise ValueError(f"color_threshold and color_search_px must be >= 0, got {self.color_threshold}, "
+                             f"{self.color_search_px}")
         if self.fill_invalid_px < 0 or self.median_px not in (0, 3, 5) or self.blur_px < 0:
             raise ValueError(f"fill_invalid_px and blur_px must be >= 0 and median_px 0, 3 or 5, got "
                              f"{self.fill_invalid_px}, {self.blur_px}, {self.median_px}")
 
 
 class BackgroundModel:
-    """Empty-belt depth, the per-pixel median of the first ``frames_needed`` frames fed to it.
+    """Empty-belt depth (and colour), the per-pixel median of the first ``frames_needed`` frames fed to it.
 
     Non-finite and non-positive depths (no return) are ignored in the median; a pixel never seen
-    stays NaN and therefore never rises above the belt in :func:`height_map`.
+    stays NaN and therefore never rises above the belt in :func:`height_map`. The colour background
+    is the median of the colour frames that came with those frames (None if none did).
     Call :meth:`reset` to relearn, e.g. after the camera or belt moved.
     """
 
@@ -97,8 +111,7 @@ class BackgroundModel:
         if frames_needed < 1:
             raise ValueError(f"frames_needed must be >= 1, got {frames_needed}")
         self.frames_needed = frames_needed
-        self._frames: list[np.ndarray] = []
-        self._depth: np.ndarray | None = None
+        self.reset()
 
     @property
     def ready(self) -> bool:
@@ -112,27 +125,41 @@ class BackgroundModel:
             raise RuntimeError("background not learned yet: feed frames with add() until ready")
         return self._depth
 
-    def add(self, depth: np.ndarray) -> bool:
-        """Feed one empty-belt depth frame; returns :attr:`ready`. Frames after learning are ignored."""
+    @property
+    def color(self) -> np.ndarray | None:
+        """The learned background colour (float32 (H, W, 3)), None until learned or when no frame had colour."""
+        return self._color
+
+    def add(self, depth: np.ndarray, color: np.ndarray | None = None) -> bool:
+        """Feed one empty-belt depth frame (and its registered colour); returns :attr:`ready`.
+
+        Frames after learning are ignored."""
         if self._depth is not None:
             return True
         frame = np.asarray(depth, dtype=np.float32)
         if self._frames and frame.shape != self._frames[0].shape:
             raise ValueError(f"depth shape changed from {self._frames[0].shape} to {frame.shape}")
+        if color is not None and np.shape(color) != frame.shape + (3,):
+            raise ValueError(f"colour shape {np.shape(color)} does not match depth {frame.shape}")
         with np.errstate(invalid="ignore"):
             frame = np.where(np.isfinite(frame) & (frame > 0.0), frame, np.float32(np.nan))
         self._frames.append(frame)
+        if color is not None:
+            self._colors.append(np.asarray(color, dtype=np.float32))
         if len(self._frames) >= self.frames_needed:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pixels stay NaN on purpose
                 self._depth = np.nanmedian(np.stack(self._frames), axis=0).astype(np.float32)
-            self._frames = []
+            self._color = np.median(np.stack(self._colors), axis=0).astype(np.float32) if self._colors else None
+            self._frames, self._colors = [], []
         return self.ready
 
     def reset(self) -> None:
         """Forget the background so the next frames relearn it."""
-        self._frames = []
-        self._depth = None
+        self._frames: list[np.ndarray] = []
+        self._colors: list[np.ndarray] = []
+        self._depth: np.ndarray | None = None
+        self._color: np.ndarray | None = None
 
 
 def height_map(depth: np.ndarray, background: np.ndarray) -> np.ndarray:
@@ -144,9 +171,13 @@ def height_map(depth: np.ndarray, background: np.ndarray) -> np.ndarray:
 
 
 def segment_depth(
-    depth: np.ndarray, background: np.ndarray, params: SegmentationParams = SegmentationParams()
+    depth: np.ndarray, background: np.ndarray, params: SegmentationParams = SegmentationParams(),
+    color: np.ndarray | None = None, color_background: np.ndarray | None = None,
 ) -> list[Blob]:
-    """Segment the fillets in a depth frame against a background depth."""
+    """Segment the fillets in a depth frame against a background depth.
+
+    With ``params.color_threshold`` set and a registered colour frame and colour background given,
+    the outline near the depth mask comes from the colour (:func:`refine_with_color`)."""
     height = height_map(depth, background)
     if params.fill_invalid_px:
         with np.errstate(invalid="ignore"):
@@ -156,7 +187,26 @@ def segment_depth(
         height = cv2.medianBlur(height, params.median_px)
     if params.blur_px:
         height = cv2.GaussianBlur(height, (0, 0), params.blur_px)
-    return segment_height_map(height, params)
+    mask = cv2.compare(height, params.height_threshold_m, cv2.CMP_GT) if height.size else None
+    if mask is not None and params.color_threshold and color is not None and color_background is not None:
+        mask = refine_with_color(mask, color, color_background, params)
+    return segment_mask(mask, height, params)
+
+
+def refine_with_color(depth_mask: np.ndarray, color: np.ndarray, color_background: np.ndarray,
+                      params: SegmentationParams) -> np.ndarray:
+    """Fillet pixels by colour change from the empty belt, kept only within ``color_search_px`` of the depth mask.
+
+    Depth finds the fillets; the colour, whose noise is a few levels against a fillet-to-belt contrast of tens,
+    draws their outline, which depth noise at a thin rim would fray."""
+    if np.shape(color) != depth_mask.shape + (3,) or np.shape(color_background) != np.shape(color):
+        raise ValueError(f"colour {np.shape(color)} and its background {np.shape(color_background)} must be "
+                         f"registered to the depth image {depth_mask.shape}")
+    distance = np.linalg.norm(np.asarray(color, np.float32) - color_background, axis=2).astype(np.float32)
+    changed = cv2.compare(distance, params.color_threshold, cv2.CMP_GT)
+    size = 2 * params.color_search_px + 1
+    near = cv2.dilate(depth_mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+    return cv2.bitwise_and(changed, near)
 
 
 def fill_invalid(height: np.ndarray, valid: np.ndarray, radius_px: int) -> np.ndarray:
@@ -171,9 +221,14 @@ def fill_invalid(height: np.ndarray, valid: np.ndarray, radius_px: int) -> np.nd
 
 def segment_height_map(height: np.ndarray, params: SegmentationParams = SegmentationParams()) -> list[Blob]:
     """Split a height map into fillet blobs, sorted by centroid row then column."""
-    if height.size == 0:  # a 0-pixel frame has no fillets (OpenCV would assert on it)
+    mask = cv2.compare(height, params.height_threshold_m, cv2.CMP_GT) if height.size else None
+    return segment_mask(mask, height, params)
+
+
+def segment_mask(mask: np.ndarray | None, height: np.ndarray, params: SegmentationParams) -> list[Blob]:
+    """Split a fillet mask (uint8, 255 = fillet; None for a 0-pixel frame) into blobs with heights from ``height``."""
+    if mask is None:  # a 0-pixel frame has no fillets (OpenCV would assert on it)
         return []
-    mask = cv2.compare(height, params.height_threshold_m, cv2.CMP_GT)
     if params.open_kernel_px > 1:
         kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (params.open_kernel_px, params.open_kernel_px))
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)

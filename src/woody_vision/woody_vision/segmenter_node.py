@@ -4,6 +4,10 @@ Thin adapter over woody_vision.segmentation and woody_vision.tracking. The
 empty-belt background is learned from the first frames (publish on
 ~/reset_background to relearn it); every bad frame is skipped with one log
 line so a camera hiccup never takes the node down or corrupts its tracks.
+With ``color_threshold`` > 0 the outline comes from the registered colour
+frame of the same stamp (a depth frame waits for it until the next depth
+frame arrives; one whose colour never came is skipped like a lost frame, so
+no depth-only outline, which is another shape, enters a fillet's score).
 """
 
 from __future__ import annotations
@@ -46,6 +50,11 @@ class Segmenter(Node):
                               "real camera).", 0, 5),
             blur_px=declare(self, "blur_px", 0.0, "Gaussian sigma smoothing the height map after the median (px; 0 = "
                             "off; 1.0 for a real camera).", 0.0, 20.0),
+            color_threshold=declare(self, "color_threshold", 0.0, "Outline from the registered colour image: a "
+                                    "pixel near the depth mask whose colour differs from the empty belt's by more "
+                                    "than this is fillet (8-bit levels; 0 = off; 20 for a real camera).", 0.0, 255.0),
+            color_search_px=declare(self, "color_search_px", 8, "Colour refines the outline only this close to the "
+                                    "depth mask (px).", 0, 100),
         )
         self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, 6)
         self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Distance between lane centres (m).", 0.01, 2.0)
@@ -65,6 +74,11 @@ class Segmenter(Node):
         self.latest_color: Image | None = None
         self.scores: dict[int, str] = {}
         self.info_size: tuple[int, int] | None = None
+        self.colors: dict[tuple[int, int], Image] = {}
+        """Recent colour frames by stamp, for the depth frame of the same stamp."""
+        self.pending: tuple[Image, np.ndarray] | None = None
+        """A depth frame waiting for its colour frame."""
+        self.without_color = 0
 
         sensor = declare_image_qos(self)
         self.tracks_pub = self.create_publisher(FilletTrackArray, topics.TRACKS,
@@ -74,8 +88,9 @@ class Segmenter(Node):
         self.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self.on_camera_info, sensor)
         self.create_subscription(Image, topics.TOP_DEPTH_IMAGE, self.on_depth, sensor)
         self.create_subscription(Empty, "~/reset_background", self.on_reset, 1)
-        if self.publish_debug:
+        if self.publish_debug or self.params.color_threshold:
             self.create_subscription(Image, topics.TOP_COLOR_IMAGE, self.on_color, sensor)
+        if self.publish_debug:
             self.create_subscription(FilletVerdict, topics.VERDICTS, self.on_verdict, 50)
 
     def on_camera_info(self, info: CameraInfo) -> None:
@@ -92,6 +107,15 @@ class Segmenter(Node):
 
     def on_color(self, msg: Image) -> None:
         self.latest_color = msg
+        if not self.params.color_threshold:
+            return
+        key = _stamp_key(msg)
+        self.colors[key] = msg
+        while len(self.colors) > COLOR_FRAMES_KEPT:
+            self.colors.pop(next(iter(self.colors)))
+        if self.pending is not None and _stamp_key(self.pending[0]) == key:
+            pending, self.pending = self.pending, None
+            self._segment(*pending)
 
     def on_verdict(self, msg: FilletVerdict) -> None:
         verdict = {FilletVerdict.CLASS_NORMAL: "normal", FilletVerdict.CLASS_WOODY: "woody"}
@@ -111,17 +135,31 @@ class Segmenter(Node):
         if self.checker.restarted:
             self.get_logger().warning("camera restarted (stamp went back or the size changed): relearning background")
             self.background.reset()
+            self.pending = None
             if self.tracker is not None:
                 self.tracker.reset()
+        if self.params.color_threshold and _stamp_key(msg) not in self.colors:
+            if self.pending is not None:  # its colour frame never came: skipped
+                self._segment(*self.pending)
+            self.pending = (msg, depth)
+            return
+        self._segment(msg, depth)
+
+    def _segment(self, msg: Image, depth: np.ndarray) -> None:
+        """Segment and track one depth frame (with its colour frame, when the outline comes from colour)."""
+        color = self._color_for(msg, depth.shape)
         out = FilletTrackArray(header=msg.header, image_width=msg.width, image_height=msg.height)
+        if self.params.color_threshold and color is None:
+            self.tracks_pub.publish(out)  # answered (a paced line_sim waits for it), but nothing tracked
+            return
         if not self.background.ready or self.tracker is None:
             if not self.background.ready:
-                self.background.add(depth)
+                self.background.add(depth, color)
             else:
                 self.checker.reject("no camera_info received yet on /top_camera/depth/camera_info; frame skipped")
             self.tracks_pub.publish(out)  # every depth frame is answered: a paced line_sim waits for it
             return
-        blobs = segment_depth(depth, self.background.depth, self.params)
+        blobs = segment_depth(depth, self.background.depth, self.params, color, self.background.color)
         update = self.tracker.update(blobs, stamp_to_seconds(msg.header.stamp))
         out.ended_ids = [t.track_id for t in update.ended]
         for track in update.active:
@@ -135,6 +173,22 @@ class Segmenter(Node):
         self.tracks_pub.publish(out)
         if self.debug_pub is not None:
             self._publish_debug(msg, update.active)
+
+    def _color_for(self, msg: Image, shape: tuple[int, ...]) -> np.ndarray | None:
+        """The colour frame of the depth frame's stamp at its size, or None (a throttled warning) without one."""
+        if not self.params.color_threshold:
+            return None
+        color_msg = self.colors.pop(_stamp_key(msg), None)
+        try:
+            if color_msg is not None:
+                return match_size(color_rgb(color_msg), shape[0], shape[1])
+            reason = "no colour frame with this depth frame's stamp"
+        except FrameError as exc:
+            reason = str(exc)
+        self.without_color += 1
+        self.get_logger().warning(f"{reason}: depth frame skipped ({self.without_color} so far)",
+                                  throttle_duration_sec=5.0)
+        return None
 
     def _check_calibration_size(self, msg: Image) -> None:
         """Refuse depth frames of another size than the camera_info their K belongs to."""
@@ -168,7 +222,17 @@ class Segmenter(Node):
         self.debug_pub.publish(out)
 
     def close(self) -> None:
-        print(f"[segmenter] {self.frames} depth frames received, {self.checker.rejected} rejected", flush=True)
+        print(f"[segmenter] {self.frames} depth frames received, {self.checker.rejected} rejected"
+              + (f", {self.without_color} skipped without their colour frame" if self.params.color_threshold else ""),
+              flush=True)
+
+
+COLOR_FRAMES_KEPT = 10
+"""Colour frames kept for the depth frames of their stamps (colour usually arrives just before its depth)."""
+
+
+def _stamp_key(msg: Image) -> tuple[int, int]:
+    return msg.header.stamp.sec, msg.header.stamp.nanosec
 
 
 def main(args: list[str] | None = None) -> None:
