@@ -242,11 +242,17 @@ def _run_checked(args: argparse.Namespace) -> int:
         lease.release()
 
 
-def _refuse_foreign_nodes(monitor: LineMonitor, domain_id: int, seconds: float = 1.5) -> None:
-    """On an exported ROS_DOMAIN_ID other programs may already run: the line would mix with them."""
-    monitor.spin(seconds)  # time for discovery
-    foreign = sorted({f"{ns.rstrip('/')}/{name}" for name, ns in monitor.node.get_node_names_and_namespaces()
-                      if name != monitor.node.get_name()})
+def _refuse_foreign_nodes(monitor: LineMonitor, domain_id: int, seconds: float = 4.0) -> None:
+    """On an exported ROS_DOMAIN_ID other programs may already run: the line would mix with them.
+
+    Discovery is given up to ``seconds`` (a loaded machine took more than 1.5 s to see a node that was there).
+    """
+    deadline = time.monotonic() + seconds
+    foreign: list[str] = []
+    while not foreign and time.monotonic() < deadline:
+        monitor.spin(0.1)
+        foreign = sorted({f"{ns.rstrip('/')}/{name}" for name, ns in monitor.node.get_node_names_and_namespaces()
+                          if name != monitor.node.get_name()})
     if foreign:
         raise RunRefused(f"ROS_DOMAIN_ID={domain_id} (exported) already has nodes ({', '.join(foreign)}); the line "
                          "would mix with them. Unset ROS_DOMAIN_ID to get a private domain, or pass --share-domain")
