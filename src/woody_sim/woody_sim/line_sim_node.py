@@ -245,7 +245,8 @@ class LineSim(Node):
                 self.renderer.remove_fillet(fillet_id)
                 if fillet_id in self.world.blown_up:
                     self.get_logger().warning(f"fillet {fillet_id} removed: its chain blew up numerically at the "
-                                              "belt edge (known rare instability); it will be unscored")
+                                              "belt edge (an open defect of a running line, README 'Known "
+                                              "defects'); it will be unscored")
             want_top = now + 1e-9 >= next_top
             want_side, poses = False, None
             if self.side_period is not None and now + 1e-9 >= next_side:
