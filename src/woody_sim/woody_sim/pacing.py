@@ -26,7 +26,7 @@ from collections.abc import Callable
 class LeadLimiter:
     """Acknowledged sim time of the consumer, and whether the producer must wait for it."""
 
-    def __init__(self, max_lead_s: float, stall_s: float = 5.0, start_s: float = 60.0, probe_s: float = 0.5,
+    def __init__(self, max_lead_s: float, stall_s: float = 10.0, start_s: float = 60.0, probe_s: float = 0.5,
                  clock: Callable[[], float] = time.monotonic) -> None:
         if min(max_lead_s, stall_s, start_s, probe_s) <= 0:
             raise ValueError(f"max_lead_s, stall_s, start_s and probe_s must be > 0, got {max_lead_s}, {stall_s}, "
