@@ -13,6 +13,7 @@ import pytest
 from conftest import REPO, spin_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from woody_common.stamps import stamp_to_seconds
 from woody_tools.processes import NodeProcess, entry_point
 
 SAMPLE = REPO / "bags" / "sample" / "line.mcap"
@@ -82,7 +83,8 @@ def replay_into_vision(bag, topics, ros_node, ros_domain, tmp_path, segmenter_pa
 
 
 def assert_same_verdicts(received, expected, logs: str, phi_rel: float = 1e-6) -> None:
-    assert len(received) == len(expected), logs
+    seen = [(v.lane, round(stamp_to_seconds(v.header.stamp), 3), v.classification, v.unscored_reason) for v in received]
+    assert len(received) == len(expected), f"{seen}\n{logs}"
 
     def key(v):
         return (v.lane, v.header.stamp.sec, v.header.stamp.nanosec)

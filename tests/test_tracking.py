@@ -150,6 +150,20 @@ def test_prediction_bridges_frames_that_never_arrived():
     assert again.track_id == track.track_id and again.age == 4
 
 
+def test_a_burst_of_lost_frames_right_after_entering_the_view_keeps_the_id():
+    """Entering from the image border the centroid moves at half speed, so the velocity is short; the gate widens
+    with the predicted motion and the fillet keeps its track across 12 lost frames."""
+    tracker = CentroidTracker(max_distance_px=40.0)
+    for i, v in enumerate((20, 24, 28)):  # growing out of the border: 4 px a frame, the belt moves 8
+        (track,) = tracker.update([square_blob(300, v)], i / FPS).active
+    (again,) = tracker.update([square_blob(300, 28 + 13 * 8)], 15 / FPS).active  # predicted 80 px short
+    assert again.track_id == track.track_id
+    far = CentroidTracker(max_distance_px=40.0)  # the widening is bounded: a blob much farther is another fillet
+    for i, v in enumerate((20, 24, 28)):
+        far.update([square_blob(300, v)], i / FPS)
+    assert far.update([square_blob(300, 28 + 13 * 20)], 15 / FPS).active[-1].track_id != track.track_id
+
+
 def test_stale_track_ghost_does_not_steal_a_live_tracks_blob():
     """A fillet falling off the edge moves backwards in the image; its extrapolated ghost must not take over."""
     tracker = CentroidTracker(max_distance_px=40.0, max_unseen=15)

@@ -30,6 +30,10 @@ DEFAULT_MAX_UNSEEN = 15
 DEFAULT_MAX_DISTANCE_PX = 40.0
 """Association gate around the predicted centroid (belt motion is 8–11 px/frame at 30 Hz; neighbouring fillets'
 centroids are ≥ ~75 px apart)."""
+GAP_GATE_GROWTH = 0.5
+"""The gate widens by this fraction of the predicted motion since the last sighting: a track's velocity comes
+from its last two sightings, and a fillet entering the view from the image border moves its centroid at about
+half its speed, so after a burst of lost frames the prediction can fall that much short."""
 NO_LANE = -1
 
 
@@ -125,9 +129,10 @@ class CentroidTracker:
         # the edge moving backwards in the image) must not take the blob of the live track right behind it.
         unseen = np.array([self._tracks[i].unseen for i in ids], dtype=float)
         stale_penalty = 2.0 * self.max_distance_px * unseen[:, None]
-        gated = np.where(distance <= self.max_distance_px, distance + stale_penalty, 1e9)
+        gate = (self.max_distance_px + GAP_GATE_GROWTH * np.linalg.norm(velocity, axis=1) * elapsed)[:, None]
+        gated = np.where(distance <= gate, distance + stale_penalty, 1e9)
         rows, cols = linear_sum_assignment(gated)
-        return {ids[r]: int(c) for r, c in zip(rows, cols) if distance[r, c] <= self.max_distance_px}
+        return {ids[r]: int(c) for r, c in zip(rows, cols) if distance[r, c] <= gate[r, 0]}
 
     def _matched(self, track: Track, blob: Blob, stamp: float) -> Track:
         elapsed = stamp - track.stamp
