@@ -110,6 +110,13 @@ def test_a_piece_split_off_past_the_edge_gets_no_verdict_but_a_fillet_appearing_
     assert alone.label == "unscored" and alone.shape.reason == REASON_STARTED_PAST_EDGE
 
 
+def test_a_track_seen_only_twice_then_lost_gives_no_verdict():
+    grader = FilletGrader(EDGE)
+    assert feed(grader, 4, 0, contours(2), end=True) == [] and grader.tentative == 1
+    ((_, lost),) = feed(grader, 5, 0, contours(3), end=True)  # three sightings: an unscored verdict
+    assert lost.label == "unscored"
+
+
 def test_unseen_observations_do_not_feed_the_evaluator():
     grader = FilletGrader(EDGE)
     shapes = contours(90)

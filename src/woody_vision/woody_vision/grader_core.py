@@ -58,6 +58,10 @@ class GradedFillet:
         return self.shape.status == STATUS_SCORED
 
 
+MIN_SIGHTINGS = 3
+"""Frames a track must be seen in before its end gives a verdict."""
+
+
 @dataclass
 class _Pending:
     graded: GradedFillet
@@ -85,6 +89,9 @@ class FilletGrader:
         self._side: list[SideMeasurement] = []
         self.now = -math.inf
         self.fragments = 0
+        self.tentative = 0
+        """Tracks that ended after fewer than MIN_SIGHTINGS frames (a fillet's first sightings at the image border
+        before a burst of lost frames, noise): no verdict, like a tentative track in SORT-style trackers."""
         """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_lane_has_approached`)."""
 
     def on_tracks(self, stamp: float, tracks: Sequence[TrackObservation],
@@ -105,7 +112,9 @@ class FilletGrader:
         for track_id in ended_ids:
             evaluator = self._evaluators.pop(track_id, None)
             result = evaluator.finish() if evaluator is not None else None
-            if result is not None:
+            if result is not None and evaluator.sightings < MIN_SIGHTINGS:
+                self.tentative += 1  # seen once or twice, then lost: a track the grader cannot stand behind
+            elif result is not None:
                 decided += self._decide(track_id, result)
             self._lanes.pop(track_id, None)
         return decided + self.release(self.now)

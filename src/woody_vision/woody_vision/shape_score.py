@@ -237,6 +237,7 @@ class ShapeEvaluator:
         self._reference: ShapeReference | None = None
         self._trace: list[FrameScore] = []
         self._last_stamp: float | None = None
+        self._sightings = 0
         self._approach: list[tuple[float, float]] = []
         """(stamp, leading row) of the flat frames: the fillet's own speed and frame interval in the image."""
 
@@ -244,6 +245,11 @@ class ShapeEvaluator:
     def done(self) -> bool:
         """True once the result has been produced."""
         return self._phase is _Phase.DONE
+
+    @property
+    def sightings(self) -> int:
+        """Frames fed so far."""
+        return self._sightings
 
     @property
     def referenced(self) -> bool:
@@ -255,6 +261,7 @@ class ShapeEvaluator:
         if self._phase is _Phase.DONE:
             return None
         self._last_stamp = stamp
+        self._sightings += 1
         points = np.asarray(contour, dtype=np.int32).reshape(-1, 2)
         if self._phase is _Phase.APPROACHING:
             if float(points[:, 1].max()) < self.edge_row - self.reference_margin_px:
