@@ -89,10 +89,10 @@ class FilletGrader:
         self._side: list[SideMeasurement] = []
         self.now = -math.inf
         self.fragments = 0
+        """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_lane_has_approached`)."""
         self.tentative = 0
         """Tracks that ended after fewer than MIN_SIGHTINGS frames (a fillet's first sightings at the image border
         before a burst of lost frames, noise): no verdict, like a tentative track in SORT-style trackers."""
-        """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_lane_has_approached`)."""
 
     def on_tracks(self, stamp: float, tracks: Sequence[TrackObservation],
                   ended_ids: Iterable[int] = ()) -> list[GradedFillet]:
