@@ -199,21 +199,24 @@ def test_inertia_floor_raises_only_the_thin_slices_hinge_axis(fillet: FilletMesh
     assert bare[5, 1] == pytest.approx(model.masses[5] * 4.0 * (half[0] ** 2 + half[2] ** 2) / 12.0)
 
 
-def test_without_the_inertia_floor_a_heavy_stiff_chain_blows_up_on_the_roller():
+def test_without_the_inertia_floor_heavy_stiff_chains_blow_up_on_the_roller():
     """The soak's failure (docs/physics.md, "Blow-ups"), kept reproducible so the soak test can fail.
 
-    A 300 kg, k = 400 chain pivots on the roller on its thin tail slices; without the floor they whip
-    and the chain is thrown faster than 12 m/s; with it the same batch falls as it should.
+    Heavy, stiff chains pivot on the roller on their thin tail slices; without the floor they whip and a
+    chain is thrown faster than 12 m/s; with it the same batches fall as they should. Two batches of the
+    failing family, because which single passage blows up changes with round-off (docs/physics.md).
     """
     from woody_sim.meshes import load_mesh_set
     from woody_sim.soak import SoakCondition, run_batch
 
     meshes, _ = load_mesh_set("builtin")
-    condition = SoakCondition(mesh=1, k=400.0, mass=300.0, speed_fpm=100.0, lanes=6, staggered=False)
-    _, blown, _, _ = run_batch(condition, meshes[1], calibrated_config(inertia_floor=0.0))
-    assert blown >= 1
-    passages, blown, worst, _ = run_batch(condition, meshes[1], calibrated_config())
-    assert (passages, blown) == (6, 0) and worst < 6.0
+    conditions = [SoakCondition(mesh=1, k=400.0, mass=300.0, speed_fpm=100.0, lanes=6, staggered=True),
+                  SoakCondition(mesh=3, k=400.0, mass=100.0, speed_fpm=100.0, lanes=6, staggered=False)]
+    bare = [run_batch(c, meshes[c.mesh], calibrated_config(inertia_floor=0.0)) for c in conditions]
+    assert sum(blown for _, blown, _, _ in bare) >= 1
+    for condition in conditions:
+        passages, blown, worst, _ = run_batch(condition, meshes[condition.mesh], calibrated_config())
+        assert (passages, blown) == (6, 0) and worst < 6.0
 
 
 def run_digest() -> str:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from collections import deque
 from types import SimpleNamespace
 
 import numpy as np
@@ -126,6 +127,8 @@ class LineSim(Node):
         if not meshes:
             raise ValueError(f"mesh set '{p.mesh_spec}' has no loadable mesh")
         self.meshes = {m.name: m for m in meshes}
+        for mesh in meshes:  # build every chain model now (~0.2 s each), not in the loop at its first spawn
+            self.world.model_for(mesh)
         interval = 60.0 / p.rate if p.rate > 0 else p.spacing / self.speed
         self.schedule = SpawnSchedule(meshes=meshes, k_values=self.k_values, lanes=p.lanes, interval_s=interval,
                                       seed=p.seed)
@@ -236,7 +239,7 @@ class LineSim(Node):
         self.get_logger().info(self.summary)
         self._wait_for_subscribers(executor)
         next_top, next_side, next_clock = 0.0, 0.0, 0.0
-        pending_stamp = None
+        in_flight: deque[float] = deque()  # sim stamps of the frames the renderer is working on, oldest first
         wall_start, sim_start = time.monotonic(), self.world.time
         while not stop.is_set():
             self._spawn_due()
@@ -256,12 +259,12 @@ class LineSim(Node):
             if want_top or want_side:
                 if want_top:
                     self._hold_for_consumer(executor, now)
-                if pending_stamp is not None:
-                    self._publish_frames(self.renderer.collect(copy=False), pending_stamp)
+                while in_flight and (self.renderer.ready() or not self.renderer.can_submit):
+                    self._publish_frames(self.renderer.collect(copy=False), in_flight.popleft())
                 self._publish_clock()
                 self.renderer.submit(poses if poses is not None else self.world.segment_poses(), want_top=want_top,
                                      want_side=want_side)
-                pending_stamp = now
+                in_flight.append(now)
                 next_top += self.top_period if want_top else 0.0
                 next_clock = now + CLOCK_PERIOD
                 executor.spin_once(timeout_sec=0.0)  # serve /spawn_fillet between frames, not every step
@@ -274,8 +277,8 @@ class LineSim(Node):
                     time.sleep(ahead)
             if self.duration and now >= self.duration:
                 break
-        if pending_stamp is not None:
-            self._publish_frames(self.renderer.collect(copy=False), pending_stamp)
+        while in_flight:
+            self._publish_frames(self.renderer.collect(copy=False), in_flight.popleft())
         elapsed = time.monotonic() - wall_start
         self.get_logger().info(f"stopped at sim time {self.world.time:.2f} s after {elapsed:.1f} s wall "
                                f"(rtf {(self.world.time - sim_start) / max(elapsed, 1e-9):.2f}x), "

@@ -46,6 +46,7 @@ import pybullet as p
 
 from woody_common.calibration import Calibration, load_calibration
 from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
+from woody_sim.hinge_law import chain_mass_matrix, hinge_state, implicit_hinge_torque
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.meshes import FilletMesh
 
@@ -137,6 +138,10 @@ class _Fillet:
     """(N - 1,) hinge torques applied in the last step."""
     rate: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(N - 1,) hinge rates at the start of the last step."""
+    inertias: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """(N, 3) principal inertias the chain was built with (:func:`segment_inertias`)."""
+    joint_offsets: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """(N - 1, 3) hinge i to the centre of segment i + 1, in that segment's frame."""
 
 
 def seed_dynamic_friction(friction_static: float) -> float:
@@ -159,43 +164,24 @@ def _check_positive_finite(name: str, value: float) -> float:
     return value
 
 
-def _quat_conj_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """conj(a) * b for (n, 4) quaternions in pybullet's (x, y, z, w) order."""
-    ax, ay, az, aw = -a[:, 0], -a[:, 1], -a[:, 2], a[:, 3]
-    bx, by, bz, bw = b[:, 0], b[:, 1], b[:, 2], b[:, 3]
-    return np.column_stack(
-        [
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ]
-    )
-
-
-def _y_axes(q: np.ndarray) -> np.ndarray:
-    """World direction of each frame's local +y axis, for (n, 4) quaternions (x, y, z, w)."""
-    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    return np.column_stack([2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)])
-
-
-def _capped_drive(velocity: np.ndarray, normal: np.ndarray, speed: float, mass_rate: float, normal_force: float,
-                  cfg: PhysicsConfig) -> np.ndarray:
-    """The seed's drive force (3,) on one touching segment: m (V_line - v) / dt in the contact's tangent plane.
+def _capped_drives(velocity: np.ndarray, normal: np.ndarray, speed: float, mass_rate: np.ndarray,
+                   normal_force: np.ndarray, cfg: PhysicsConfig) -> np.ndarray:
+    """The seed's drive forces (n, 3) on n touching segments: m (V_line - v) / dt in each contact's tangent plane.
 
     V_line is the belt velocity (``speed`` along +x) everywhere, as in the
     seed: on the flat belt it is the belt's own motion; on the roller only its
     projection on the tangent plane pulls, which shrinks as the roller curves
     down, so a segment is let go by geometry, with no explicit release test.
-    ``normal`` is the conveyor's outward unit normal, ``mass_rate`` m / dt.
+    ``normal`` holds the conveyor's outward unit normals, ``mass_rate`` m / dt.
+    A force above mu_static N is cut to mu_dynamic N (sliding).
     """
     slip = velocity - np.array([speed, 0.0, 0.0])
-    slip -= slip.dot(normal) * normal
-    force = -mass_rate * slip
-    size = float(np.linalg.norm(force))
-    if size <= cfg.friction_static * normal_force:
-        return force
-    return force * (cfg.friction_dynamic * normal_force / size)
+    slip -= np.einsum("ij,ij->i", slip, normal)[:, None] * normal
+    force = -mass_rate[:, None] * slip
+    size = np.sqrt(np.einsum("ij,ij->i", force, force))
+    sliding = size > cfg.friction_static * normal_force
+    force[sliding] *= (cfg.friction_dynamic * normal_force[sliding] / size[sliding])[:, None]
+    return force
 
 
 def segment_inertias(model: FilletModel, floor: float) -> np.ndarray:
@@ -215,20 +201,6 @@ def segment_inertias(model: FilletModel, floor: float) -> np.ndarray:
     inertia *= m[:, None] / 12.0
     inertia[:, 1] = np.maximum(inertia[:, 1], floor * inertia[:, 1].mean())
     return inertia
-
-
-def hinge_state(state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Hinge angles and rates (N - 1,) from segment states (N, 13); positive = downstream pitches down.
-
-    Computed from the link poses already read each step, which saves a
-    pybullet query per fillet; equal to ``getJointStates`` up to round-off.
-    """
-    parent, child = state[:-1], state[1:]
-    rel = _quat_conj_mul(parent[:, 3:7], child[:, 3:7])
-    theta = 2.0 * np.arctan2(rel[:, 1], rel[:, 3])
-    theta = (theta + np.pi) % (2.0 * np.pi) - np.pi
-    rate = np.einsum("ij,ij->i", child[:, 10:13] - parent[:, 10:13], _y_axes(parent[:, 3:7]))
-    return theta, rate
 
 
 class LineWorld:
@@ -343,14 +315,15 @@ class LineWorld:
         return fillet_id
 
     def _kinematic_state(self, fillet: _Fillet) -> None:
-        """Flat pose translated at line speed since spawn (the exact flat-belt motion)."""
-        n = fillet.model.n_segments
-        shift = np.array([fillet.info.speed_mps * (self.time - fillet.info.spawn_time), 0.0, 0.0])
-        state = np.zeros((n, 13))
-        state[:, :3] = fillet.origin + shift + fillet.model.box_centers
-        state[:, 6] = 1.0
-        state[:, 7] = fillet.info.speed_mps
-        fillet.state = state
+        """Flat pose translated at line speed since spawn (the exact flat-belt motion); only x changes per step."""
+        shift = fillet.info.speed_mps * (self.time - fillet.info.spawn_time)
+        x = fillet.origin[0] + shift + fillet.model.box_centers[:, 0]
+        if fillet.state.shape[0] != fillet.model.n_segments:
+            fillet.state = np.zeros((fillet.model.n_segments, 13))
+            fillet.state[:, 1:3] = fillet.origin[1:] + fillet.model.box_centers[:, 1:]
+            fillet.state[:, 6] = 1.0
+            fillet.state[:, 7] = fillet.info.speed_mps
+        fillet.state[:, 0] = x
 
     def _leading_x(self, fillet: _Fillet) -> float:
         return float(fillet.state[-1, 0] + fillet.model.box_half_extents[-1, 0])
@@ -408,6 +381,7 @@ class LineWorld:
             physicsClientId=c,
         )
         inertias = segment_inertias(model, self.config.inertia_floor)
+        fillet.inertias, fillet.joint_offsets = inertias, centers[1:] - hinges
         for link in range(-1, n - 1):
             limits = {} if link < 0 else {"jointLowerLimit": -JOINT_LIMIT, "jointUpperLimit": JOINT_LIMIT}
             p.changeDynamics(
@@ -488,65 +462,51 @@ class LineWorld:
             )
 
     def _implicit_torque(self, fillet: _Fillet, theta: np.ndarray, rate: np.ndarray) -> np.ndarray:
-        """Hinge torque tau = -k theta' - c theta_dot' evaluated at the end of the step (backward Euler).
-
-        The chain's joint-space inertia comes from pybullet's mass matrix: with
-        the floating base eliminated (Schur complement) it is S, and
-        theta_dot' = theta_dot + dt S^-1 (tau + tau_ext). tau_ext, every other
-        torque on the hinges (contacts, drive, limits), is observed from the
-        previous step as S (theta_dot - theta_dot_prev) / dt - tau_prev.
-        Solving (S + dt D) tau = S (-k theta - D theta_dot) - dt D tau_ext with
-        D = c + k dt keeps even the lightest tip segment stable.
-        """
+        """Backward-Euler hinge torques (:func:`~woody_sim.hinge_law.implicit_hinge_torque`) from the chain's
+        mass matrix in its current pose (:func:`~woody_sim.hinge_law.chain_mass_matrix`, equal to pybullet's
+        ``calculateMassMatrix`` in the joint block once the base is eliminated)."""
         cfg = self.config
-        k, dt = fillet.info.k, cfg.dt
-        rows = p.calculateMassMatrix(fillet.body, theta.tolist(), physicsClientId=self._client)
-        mass = np.fromiter(itertools.chain.from_iterable(rows), float, len(rows) ** 2).reshape(len(rows), -1)
-        base, joints = mass[:6, :6], mass[6:, 6:]
-        schur = joints - mass[6:, :6] @ np.linalg.solve(base, mass[:6, 6:])
-        if fillet.torque.size:
-            external = schur @ ((rate - fillet.rate) / dt) - fillet.torque
-        else:
-            external = np.zeros_like(theta)
-        d = cfg.damping + k * dt
-        rhs = schur @ (-k * theta - d * rate) - dt * d * external
-        return np.linalg.solve(schur + dt * d * np.eye(len(theta)), rhs)
+        mass = chain_mass_matrix(fillet.state, fillet.model.masses, fillet.inertias, fillet.joint_offsets)
+        return implicit_hinge_torque(mass, theta, rate, fillet.rate, fillet.torque, fillet.info.k, cfg.damping, cfg.dt)
 
     def _update_drive(self, dynamic: list[_Fillet]) -> None:
-        """The seed's belt drive on every touching segment (:func:`_capped_drive`), capped by Coulomb friction.
+        """The seed's belt drive on every touching segment (:func:`_capped_drives`), capped by Coulomb friction.
 
         The force may not exceed mu_static N (else it slides at mu_dynamic N), N
         being the segment's low-pass filtered contact normal force, so a segment
         the roller no longer presses on gets no drive.
         """
-        by_body = {fillet.body: fillet for fillet in dynamic}
         for fillet in dynamic:
             fillet.drive[:] = 0.0
         if not dynamic:
             return
-        touching: dict[tuple[int, int], list[float]] = {}
-        for contact in p.getContactPoints(bodyA=self._conveyor, physicsClientId=self._client):
-            if contact[2] in by_body and contact[8] < CONTACT_DISTANCE:
-                acc = touching.setdefault((contact[2], contact[4] + 1), [0.0, 0.0, 0.0])
-                n = contact[9]  # normal force (N); contact[7] points from the fillet to the conveyor
-                acc[0] -= n * contact[7][0]
-                acc[1] -= n * contact[7][2]
-                acc[2] += n
+        # contact[7] points from the fillet to the conveyor; contact[9] is the normal force (N)
+        rows = np.array([(c[2], c[4] + 1, c[7][0], c[7][2], c[9])
+                         for c in p.getContactPoints(bodyA=self._conveyor, physicsClientId=self._client)
+                         if c[8] < CONTACT_DISTANCE]).reshape(-1, 5)
         cfg = self.config
-        dt = cfg.dt
-        blend = min(1.0, dt / cfg.normal_force_tau)
+        blend = min(1.0, cfg.dt / cfg.normal_force_tau)
         for fillet in dynamic:
             fillet.normal_force *= 1.0 - blend
-        for (body, segment), (nx, nz, force) in touching.items():
-            fillet = by_body[body]
-            fillet.normal_force[segment] += blend * force
-            norm = math.hypot(nx, nz)
-            if norm <= 0.0:
-                continue
-            fillet.drive[segment] = _capped_drive(
-                fillet.state[segment, 7:10], np.array([nx / norm, 0.0, nz / norm]), fillet.info.speed_mps,
-                fillet.model.masses[segment] / dt, fillet.normal_force[segment], cfg,
-            )
+            mine = rows[rows[:, 0] == fillet.body]
+            if len(mine):
+                self._drive_fillet(fillet, mine[:, 1].astype(int), mine[:, 2:], blend)
+
+    def _drive_fillet(self, fillet: _Fillet, segments: np.ndarray, contacts: np.ndarray, blend: float) -> None:
+        """Sum each touching segment's contact normals and forces, filter N, and set its capped drive."""
+        n = fillet.model.n_segments
+        force = np.bincount(segments, contacts[:, 2], n)
+        nx = -np.bincount(segments, contacts[:, 2] * contacts[:, 0], n)
+        nz = -np.bincount(segments, contacts[:, 2] * contacts[:, 1], n)
+        touched = np.unique(segments)
+        fillet.normal_force[touched] += blend * force[touched]
+        norm = np.hypot(nx[touched], nz[touched])
+        touched, norm = touched[norm > 0.0], norm[norm > 0.0]
+        normal = np.column_stack([nx[touched] / norm, np.zeros(len(touched)), nz[touched] / norm])
+        fillet.drive[touched] = _capped_drives(
+            fillet.state[touched, 7:10], normal, fillet.info.speed_mps, fillet.model.masses[touched] / self.config.dt,
+            fillet.normal_force[touched], self.config,
+        )
 
     def _read_state(self, fillet: _Fillet) -> None:
         """One batched query for every link's pose and velocity (segment frames = centre-of-mass frames)."""
@@ -561,8 +521,13 @@ class LineWorld:
         fillet.state = np.fromiter(itertools.chain.from_iterable(rows), float, 13 * len(rows)).reshape(-1, 13)
 
     def _remove_finished(self) -> None:
-        """Drop fillets that blew up (too fast or non-finite: see ``blown_up``), fell, left the line or got stuck."""
+        """Drop chains that blew up (too fast or non-finite: see ``blown_up``), fell, left the line or got stuck.
+
+        Only pybullet chains are checked: a fillet on the belt fast path moves analytically.
+        """
         for fid, fillet in list(self._fillets.items()):
+            if fillet.body < 0:
+                continue
             state = fillet.state
             if not np.isfinite(state).all() or np.abs(state[:, 7:10]).max() > BLOWUP_SPEED:
                 self.blown_up.append(fid)

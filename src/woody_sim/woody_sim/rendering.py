@@ -38,6 +38,7 @@ physics stepping of frame *k + 1* on the second core.
 
 from __future__ import annotations
 
+import collections
 import ctypes
 import math
 import multiprocessing as mp
@@ -59,6 +60,7 @@ from woody_sim.line_geometry import LineGeometry, PinholeCamera
 from woody_sim.raster import ZBuffer
 
 __all__ = [
+    "FRAMES_IN_FLIGHT",
     "BELT_RGB",
     "FILLET_RGB",
     "FLOOR_RGB",
@@ -76,6 +78,9 @@ __all__ = [
     "quaternions_to_matrices",
     "visuals_from_mesh",
 ]
+
+FRAMES_IN_FLIGHT = 2
+"""Frames a :class:`RenderProcess` renders ahead of collection (one shared buffer set each)."""
 
 # --------------------------------------------------------------------------- colours
 # Base (unlit) colours. Lambert shading multiplies them by AMBIENT + DIFFUSE * cos.
@@ -216,12 +221,15 @@ def _prepare_fillet(
         verts[i, : v.shape[0]] = v
         faces.append(f + i * maxn)
     faces_arr = np.concatenate(faces, axis=0) if faces else np.zeros((0, 3), np.int64)
-    if color is None:
-        color = fillet_color(fillet_id)
+    c = _check_color(fillet_color(fillet_id) if color is None else color)
+    return _PreparedFillet(int(fillet_id), int(lane), n, verts, faces_arr, _segment_radii(visuals), c)
+
+
+def _check_color(color: Any) -> np.ndarray:
     c = np.asarray(color, dtype=np.float64)
     if c.shape != (3,) or np.any(c < 0) or np.any(c > 255):
         raise ValueError(f"add_fillet: color must be three ints 0..255, got {color!r}")
-    return _PreparedFillet(int(fillet_id), int(lane), n, verts, faces_arr, _segment_radii(visuals), c)
+    return c
 
 
 class _View:
@@ -362,10 +370,10 @@ class LineRenderer:
         color: tuple[int, int, int] | None = None,
     ) -> None:
         """Register a fillet: its lane and one SegmentVisual per chain segment (link frame)."""
-        self._add_checked(_validate_add(self.geometry, self._fillets, fillet_id, lane, visuals), color)
+        fid, lane_i = _validate_add(self.geometry, self._fillets, fillet_id, lane)
+        self._add_checked(fid, lane_i, _check_visuals(visuals), color)
 
-    def _add_checked(self, args: tuple[int, int, list], color: tuple[int, int, int] | None) -> None:
-        fillet_id, lane, vis = args
+    def _add_checked(self, fillet_id: int, lane: int, vis: list, color: tuple[int, int, int] | None) -> None:
         self._fillets[fillet_id] = _prepare_fillet(fillet_id, lane, vis, color)
 
     def remove_fillet(self, fillet_id: int) -> None:
@@ -457,9 +465,7 @@ def _segment_radii(visuals: Sequence[tuple[np.ndarray, np.ndarray]]) -> np.ndarr
     return np.array([float(np.sqrt((v * v).sum(axis=1).max())) for v, _ in visuals])
 
 
-def _validate_add(
-    geometry: LineGeometry, known: Mapping[int, Any], fillet_id: int, lane: int, visuals: Sequence[Any]
-) -> tuple[int, int, list]:
+def _validate_add(geometry: LineGeometry, known: Mapping[int, Any], fillet_id: int, lane: int) -> tuple[int, int]:
     try:
         fid = int(fillet_id)
     except (TypeError, ValueError):
@@ -468,7 +474,7 @@ def _validate_add(
         raise ValueError(f"add_fillet: fillet id {fid} is already registered")
     if not isinstance(lane, (int, np.integer)) or not 0 <= int(lane) < geometry.lanes:
         raise ValueError(f"add_fillet: lane must be 0..{geometry.lanes - 1}, got {lane!r}")
-    return fid, int(lane), _check_visuals(visuals)
+    return fid, int(lane)
 
 
 def _validate_poses(known: Mapping[int, Any], poses: Mapping[int, np.ndarray]) -> list[tuple[int, np.ndarray]]:
@@ -502,7 +508,7 @@ def _name_process(name: bytes) -> None:
         pass
 
 
-def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool, bool], buffers: dict) -> None:
+def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool, bool], buffers: list[dict]) -> None:
     # Ctrl-C in a terminal reaches the whole process group; the parent decides when rendering stops.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _name_process(b"woody-render")
@@ -513,10 +519,10 @@ def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool,
     except OSError:
         pass
     renderer = LineRenderer(geometry, render_top=flags[0], render_side=flags[1])
-    arrays = {
-        name: np.frombuffer(buf, dtype=dtype).reshape(shape) for name, (buf, dtype, shape) in buffers.items()
-    }
+    arrays = [{name: np.frombuffer(buf, dtype=dtype).reshape(shape) for name, (buf, dtype, shape) in slot.items()}
+              for slot in buffers]
     pending_error: str | None = None
+    shapes: dict[int, list] = {}  # visuals sent once per chain shape, then referred to by key
     waitables = [conn] + ([sentinel] if sentinel is not None else [])
     while True:
         ready = mpc.wait(waitables)
@@ -528,13 +534,16 @@ def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool,
             return
         op = msg[0]
         try:
-            if op == "add":
-                _, fid, lane, vis, color = msg
-                renderer._add_checked((fid, lane, vis), color)
+            if op == "shape":
+                _, key, vis = msg
+                shapes[key] = vis
+            elif op == "add":
+                _, fid, lane, key, color = msg
+                renderer._add_checked(fid, lane, shapes[key], color)
             elif op == "remove":
                 renderer._fillets.pop(msg[1], None)
             elif op == "render":
-                _, poses, want_top, want_side = msg
+                _, slot, poses, want_top, want_side = msg
                 t0 = time.perf_counter()
                 if pending_error is not None:
                     err, pending_error = pending_error, None
@@ -542,11 +551,11 @@ def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool,
                     continue
                 if want_top:
                     rgb, depth = renderer.render_top(poses)
-                    arrays["top_rgb"][...] = rgb
-                    arrays["top_depth"][...] = depth
+                    arrays[slot]["top_rgb"][...] = rgb
+                    arrays[slot]["top_depth"][...] = depth
                 t1 = time.perf_counter()
                 if want_side:
-                    arrays["side_rgb"][...] = renderer.render_side(poses)
+                    arrays[slot]["side_rgb"][...] = renderer.render_side(poses)
                 t2 = time.perf_counter()
                 conn.send(("ok", (t1 - t0, t2 - t1)))
             elif op == "close":
@@ -563,10 +572,12 @@ class RenderProcess:
     """A :class:`LineRenderer` in a child process, for overlapping rendering with physics.
 
     ``submit(poses, want_top, want_side)`` starts a frame and returns at once;
-    ``collect()`` waits for it and returns :class:`Frames` (copies, safe to
-    keep). At most one frame is in flight. ``add_fillet`` / ``remove_fillet``
-    are validated here and applied in order in the child. The child is a
-    daemon that also exits as soon as the parent process dies.
+    ``collect()`` waits for the oldest frame in flight and returns :class:`Frames`
+    (copies, safe to keep). Up to :data:`FRAMES_IN_FLIGHT` frames are in flight,
+    each in its own shared buffers, so the simulation runs on while a slow frame
+    renders. ``add_fillet`` / ``remove_fillet`` are validated here and applied
+    in order in the child. The child is a daemon that also exits as soon as the
+    parent process dies.
     """
 
     def __init__(
@@ -583,8 +594,10 @@ class RenderProcess:
         self._known: dict[int, int] = {}  # id -> n_segments
         self._lanes: dict[int, int] = {}
         self._radii: dict[int, np.ndarray] = {}
+        self._shapes: dict[int, tuple[Sequence[Any], int, np.ndarray]] = {}  # id(visuals) -> visuals, n, radii
         self._side_camera = geometry.side_camera()
-        self._inflight: tuple[bool, bool] | None = None
+        self._inflight: collections.deque[tuple[int, bool, bool]] = collections.deque()
+        self._submitted = 0
         self._timeout = float(timeout)
         self.last_render_s: tuple[float, float] = (0.0, 0.0)
         ctx = mp.get_context(start_method)
@@ -594,13 +607,13 @@ class RenderProcess:
             shapes["top_depth"] = ("f4", (geometry.top_height_px, geometry.top_width))
         if render_side:
             shapes["side_rgb"] = ("u1", (geometry.side_height_px, geometry.side_width, 3))
-        self._buffers = {}
-        self._arrays = {}
-        for name, (dtype, shape) in shapes.items():
-            nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
-            buf = ctx.RawArray("B", nbytes)
-            self._buffers[name] = (buf, dtype, shape)
-            self._arrays[name] = np.frombuffer(buf, dtype=dtype).reshape(shape)
+        self._buffers: list[dict] = [{} for _ in range(FRAMES_IN_FLIGHT)]
+        self._arrays: list[dict[str, np.ndarray]] = [{} for _ in range(FRAMES_IN_FLIGHT)]
+        for slot in range(FRAMES_IN_FLIGHT):
+            for name, (dtype, shape) in shapes.items():
+                buf = ctx.RawArray("B", int(np.prod(shape)) * np.dtype(dtype).itemsize)
+                self._buffers[slot][name] = (buf, dtype, shape)
+                self._arrays[slot][name] = np.frombuffer(buf, dtype=dtype).reshape(shape)
         self._conn, child_conn = ctx.Pipe(duplex=True)
         self._proc = ctx.Process(
             target=_child_main,
@@ -682,12 +695,20 @@ class RenderProcess:
         visuals: Sequence[Any],
         color: tuple[int, int, int] | None = None,
     ) -> None:
-        fid, lane_i, vis = _validate_add(self.geometry, self._known, fillet_id, lane, visuals)
-        _prepare_fillet(fid, lane_i, vis[:1], color)  # validates colour
-        self._send(("add", fid, lane_i, vis, None if color is None else tuple(int(c) for c in color)))
-        self._known[fid] = len(vis)
+        """Register a fillet's segment visuals; a visuals object seen before is not checked or sent again."""
+        fid, lane_i = _validate_add(self.geometry, self._known, fillet_id, lane)
+        if color is not None:
+            color = tuple(int(c) for c in _check_color(color))
+        key = id(visuals)
+        shape = self._shapes.get(key)
+        if shape is None or shape[0] is not visuals:  # the object is kept, so its id is never reused
+            vis = _check_visuals(visuals)
+            self._send(("shape", key, vis))
+            shape = self._shapes[key] = (visuals, len(vis), _segment_radii(vis))
+        self._send(("add", fid, lane_i, key, color))
+        self._known[fid] = shape[1]
         self._lanes[fid] = lane_i
-        self._radii[fid] = _segment_radii(vis)
+        self._radii[fid] = shape[2]
 
     def remove_fillet(self, fillet_id: int) -> None:
         try:
@@ -714,8 +735,8 @@ class RenderProcess:
     # ---- rendering
     def submit(self, poses: Mapping[int, np.ndarray], want_top: bool = True, want_side: bool = True) -> None:
         """Start rendering a frame in the child; returns immediately."""
-        if self._inflight is not None:
-            raise RuntimeError("a frame is already in flight: collect() it first")
+        if not self.can_submit:
+            raise RuntimeError(f"{FRAMES_IN_FLIGHT} frames are already in flight: collect() one first")
         if want_top and not self._flags[0]:
             raise RuntimeError("this RenderProcess was built with render_top=False")
         if want_side and not self._flags[1]:
@@ -724,37 +745,44 @@ class RenderProcess:
         if want_side and not want_top:
             lane = self.geometry.watched_lane
             checked = [(f, p) for f, p in checked if self._lanes[f] == lane]
-        self._send(("render", dict(checked), bool(want_top), bool(want_side)))
-        self._inflight = (bool(want_top), bool(want_side))
+        slot = self._submitted % FRAMES_IN_FLIGHT
+        self._send(("render", slot, dict(checked), bool(want_top), bool(want_side)))
+        self._inflight.append((slot, bool(want_top), bool(want_side)))
+        self._submitted += 1
 
     @property
     def busy(self) -> bool:
-        return self._inflight is not None
+        """A frame is in flight."""
+        return bool(self._inflight)
+
+    @property
+    def can_submit(self) -> bool:
+        """Fewer than :data:`FRAMES_IN_FLIGHT` frames are in flight."""
+        return len(self._inflight) < FRAMES_IN_FLIGHT
 
     def ready(self) -> bool:
-        """True when the in-flight frame can be collected without waiting."""
-        return self._inflight is not None and self._conn.poll()
+        """True when the oldest frame in flight can be collected without waiting."""
+        return bool(self._inflight) and self._conn.poll()
 
     def collect(self, copy: bool = True) -> Frames:
-        """Wait for the submitted frame. With copy=False the arrays alias shared
-        buffers that the next submit() overwrites."""
-        if self._inflight is None:
+        """Wait for the oldest frame in flight. With copy=False the arrays alias shared
+        buffers that a later submit() overwrites."""
+        if not self._inflight:
             raise RuntimeError("collect() without a submitted frame")
-        want_top, want_side = self._inflight
+        slot, want_top, want_side = self._inflight.popleft()
         deadline = time.monotonic() + self._timeout
         while not self._conn.poll(0.05):
             if not self._proc.is_alive():
-                self._inflight = None
+                self._inflight.clear()
                 raise RuntimeError(f"render process died (exit code {self._proc.exitcode})")
             if time.monotonic() > deadline:
-                self._inflight = None
+                self._inflight.clear()
                 raise TimeoutError("render process did not answer")
         status, payload = self._conn.recv()
-        self._inflight = None
         if status != "ok":
             raise RuntimeError(f"render process failed:\n{payload}")
         self.last_render_s = payload
-        a = self._arrays
+        a = self._arrays[slot]
 
         def get(name: str) -> np.ndarray:
             return a[name].copy() if copy else a[name]
