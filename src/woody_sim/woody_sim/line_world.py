@@ -25,7 +25,7 @@ Choices that are not pybullet defaults (measurements in docs/physics.md):
   bodies without friction (friction against a static belt would brake the
   fillet the real belt carries), so the drive alone sets the speed.
 * **Inertia floor on the hinge axis.** No segment's inertia about y is below
-  ``PhysicsConfig.inertia_floor`` (10 %) of the mean segment's: the thin end
+  ``PhysicsConfig.inertia_floor`` (30 %) of the mean segment's: the thin end
   slices otherwise whip under a roller contact (:func:`segment_inertias`).
 * **Flat-belt fast path.** Bullet's articulated contact cost grows with
   (contacts x links), and a fillet lying flat on the belt at line speed is a
@@ -87,7 +87,7 @@ class PhysicsConfig:
     """Coulomb cap once the needed force exceeds the static cap (seed: dynamic 0.6)."""
     normal_force_tau: float = 0.01
     """Time constant (s) of the low-pass filter on the contact normal force that caps the drive."""
-    inertia_floor: float = 0.1
+    inertia_floor: float = 0.3
     """Least inertia of a segment about its hinge axis, as a fraction of the segments' mean (an armature on the
     thin tip slices, without which pybullet's contact solver whips them; see :func:`segment_inertias`)."""
 
