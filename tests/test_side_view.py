@@ -178,6 +178,42 @@ def test_thinning_gives_a_one_pixel_connected_skeleton_inside_the_mask():
     assert zhang_suen_thinning(np.zeros((5, 5), np.uint8)).sum() == 0
 
 
+def textbook_thinning(mask: np.ndarray) -> np.ndarray:
+    """Zhang & Suen (1984) as printed: every pixel tested in every sub-iteration, removals applied together."""
+    img = np.pad((mask > 0).astype(np.uint8), 1)
+    while True:
+        changed = False
+        for step in (0, 1):
+            p = [img[:-2, 1:-1], img[:-2, 2:], img[1:-1, 2:], img[2:, 2:],  # P2 (north) .. P9, clockwise
+                 img[2:, 1:-1], img[2:, :-2], img[1:-1, :-2], img[:-2, :-2]]
+            count = sum(q.astype(int) for q in p)
+            transitions = sum(((p[i] == 0) & (p[(i + 1) % 8] == 1)).astype(int) for i in range(8))
+            if step == 0:
+                rule = (p[0] * p[2] * p[4] == 0) & (p[2] * p[4] * p[6] == 0)
+            else:
+                rule = (p[0] * p[2] * p[6] == 0) & (p[0] * p[4] * p[6] == 0)
+            remove = (img[1:-1, 1:-1] == 1) & (count >= 2) & (count <= 6) & (transitions == 1) & rule
+            if remove.any():
+                img[1:-1, 1:-1][remove] = 0
+                changed = True
+        if not changed:
+            return img[1:-1, 1:-1].astype(bool)
+
+
+def test_thinning_equals_the_textbook_algorithm_pixel_for_pixel():
+    rng = np.random.default_rng(4)
+    for i in range(60):
+        h, w = (int(v) for v in rng.integers(5, 120, 2))
+        mask = np.zeros((h, w), np.uint8)
+        for _ in range(3):
+            centre = (int(rng.integers(0, w)), int(rng.integers(0, h)))
+            axes = (int(rng.integers(1, 60)), int(rng.integers(1, 25)))
+            cv2.ellipse(mask, centre, axes, float(rng.uniform(0, 180)), 0, 360, 1, -1)
+        if i % 4 == 0:
+            mask = (rng.random((h, w)) < 0.5).astype(np.uint8)  # speckle: many small components and holes
+        assert np.array_equal(zhang_suen_thinning(mask), textbook_thinning(mask)), f"mask {i}"
+
+
 def test_bending_energy_zero_for_straight_and_growing_with_curvature():
     assert bending_energy(strip_mask(0.0)) < 1e-6
     line = np.zeros((50, 200), np.uint8)

@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 
 DEFAULT_DIFF_THRESHOLD = 40
@@ -87,16 +88,70 @@ _ZS_KERNEL = np.array([[128, 1, 2], [64, 0, 4], [32, 16, 8]], np.float32)
 def zhang_suen_thinning(mask: np.ndarray) -> np.ndarray:
     """One-pixel-wide skeleton (bool) of a binary mask, by Zhang–Suen thinning with a neighbourhood lookup."""
     img = np.pad((np.asarray(mask) > 0).astype(np.uint8), 1)
+    _thin_in_place(img, _ZS_TABLES)
+    return img[1:-1, 1:-1].astype(bool)
+
+
+@numba.njit(cache=True, nogil=True)
+def _thin_in_place(img: np.ndarray, tables: np.ndarray) -> None:
+    """Zhang–Suen on a zero-bordered 0/1 image, visiting only the border of what is left.
+
+    Each sub-iteration decides on the image as it was when it began (the
+    parallel rule), then removes. A pixel whose eight neighbours are all set
+    can never be removed (it needs 2..6 of them), so only the frontier is
+    tested: set pixels with an unset neighbour, which grows by the set
+    neighbours of every removed pixel. Stops after a round (both tables) that
+    removed nothing, as the textbook loop does.
+    """
+    h, w = img.shape
+    seen = np.zeros((h, w), np.int32)
+    frontier = np.empty((h * w, 2), np.int32)
+    n = 0
+    for r in range(1, h - 1):
+        for c in range(1, w - 1):
+            if img[r, c] and (img[r - 1, c - 1] == 0 or img[r - 1, c] == 0 or img[r - 1, c + 1] == 0
+                              or img[r, c - 1] == 0 or img[r, c + 1] == 0 or img[r + 1, c - 1] == 0
+                              or img[r + 1, c] == 0 or img[r + 1, c + 1] == 0):
+                frontier[n, 0], frontier[n, 1] = r, c
+                n += 1
+    removed = np.empty((h * w, 2), np.int32)
+    epoch = 0
     while True:
         changed = False
-        for table in _ZS_TABLES:
-            codes = cv2.filter2D(img, cv2.CV_32F, _ZS_KERNEL, borderType=cv2.BORDER_CONSTANT).astype(np.uint8)
-            remove = (img == 1) & table[codes]
-            if remove.any():
-                img[remove] = 0
-                changed = True
+        for t in range(2):
+            m = 0
+            for i in range(n):
+                r, c = frontier[i, 0], frontier[i, 1]
+                code = (img[r - 1, c] | (img[r - 1, c + 1] << 1) | (img[r, c + 1] << 2) | (img[r + 1, c + 1] << 3)
+                        | (img[r + 1, c] << 4) | (img[r + 1, c - 1] << 5) | (img[r, c - 1] << 6)
+                        | (img[r - 1, c - 1] << 7))
+                if tables[t, code]:
+                    removed[m, 0], removed[m, 1] = r, c
+                    m += 1
+            if m == 0:
+                continue
+            changed = True
+            for i in range(m):
+                img[removed[i, 0], removed[i, 1]] = 0
+            epoch += 1
+            kept = 0
+            for i in range(n):  # still set: still on the frontier
+                r, c = frontier[i, 0], frontier[i, 1]
+                if img[r, c]:
+                    seen[r, c] = epoch
+                    frontier[kept, 0], frontier[kept, 1] = r, c
+                    kept += 1
+            for i in range(m):  # the set neighbours of what went are frontier now
+                for dr in range(-1, 2):
+                    for dc in range(-1, 2):
+                        r, c = removed[i, 0] + dr, removed[i, 1] + dc
+                        if img[r, c] and seen[r, c] != epoch:
+                            seen[r, c] = epoch
+                            frontier[kept, 0], frontier[kept, 1] = r, c
+                            kept += 1
+            n = kept
         if not changed:
-            return img[1:-1, 1:-1].astype(bool)
+            return
 
 
 def principal_axis_points(mask: np.ndarray, points: np.ndarray) -> np.ndarray:
