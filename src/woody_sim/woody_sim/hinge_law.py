@@ -44,8 +44,9 @@ def implicit_hinge_torque(mass: np.ndarray, theta: np.ndarray, rate: np.ndarray,
                           prev_torque: np.ndarray, k: float, damping: float, dt: float) -> np.ndarray:
     """Hinge torque tau = -k theta' - c theta_dot' evaluated at the end of the step (backward Euler).
 
-    ``mass`` is pybullet's (6 + n, 6 + n) mass matrix of a floating-base chain
-    with n hinges. With the base eliminated (Schur complement) it is S, and
+    ``mass`` is a (6 + n, 6 + n) mass matrix of a floating-base chain with n
+    hinges (:func:`chain_mass_matrix`, or pybullet's: any base coordinates).
+    With the base eliminated (Schur complement) it is S, and
     theta_dot' = theta_dot + dt S^-1 (tau + tau_ext). tau_ext, every other
     torque on the hinges (contacts, drive, limits), is observed from the
     previous step as S (theta_dot - prev_rate) / dt - prev_torque (zero when

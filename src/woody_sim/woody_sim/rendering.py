@@ -701,7 +701,7 @@ class RenderProcess:
             color = tuple(int(c) for c in _check_color(color))
         key = id(visuals)
         shape = self._shapes.get(key)
-        if shape is None or shape[0] is not visuals:  # the object is kept, so its id is never reused
+        if shape is None:  # the cache keeps the visuals object alive, so its id cannot be reused
             vis = _check_visuals(visuals)
             self._send(("shape", key, vis))
             shape = self._shapes[key] = (visuals, len(vis), _segment_radii(vis))

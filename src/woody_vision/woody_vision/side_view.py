@@ -81,8 +81,6 @@ def _zhang_suen_tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 _ZS_TABLES = _zhang_suen_tables()
-_ZS_KERNEL = np.array([[128, 1, 2], [64, 0, 4], [32, 16, 8]], np.float32)
-"""Weights that turn the 8 neighbours (P2 north, clockwise) into a code; filter2D correlates, no flip."""
 
 
 def zhang_suen_thinning(mask: np.ndarray) -> np.ndarray:
