@@ -106,7 +106,9 @@ def chain_mass_matrix(state: np.ndarray, masses: np.ndarray, inertias: np.ndarra
     coordinates are the base's spatial velocity [omega; v] at its centre of
     mass; pybullet's ``calculateMassMatrix`` uses other base coordinates, which
     changes that block but not the joint-space inertia with the base eliminated
-    (what the hinge law uses).
+    (what the hinge law uses). Computed from the chain's own state, never from
+    pybullet's: ``calculateMassMatrix`` keeps the model it built for a body, and
+    a chain built after another was removed can inherit it (docs/physics.md).
     """
     links = state.shape[0]
     n = links - 1

@@ -247,9 +247,8 @@ class LineSim(Node):
             for fillet_id in self.world.take_removed():
                 self.renderer.remove_fillet(fillet_id)
                 if fillet_id in self.world.blown_up:
-                    self.get_logger().warning(f"fillet {fillet_id} removed: its chain blew up numerically at the "
-                                              "belt edge (an open defect of a running line, README 'Known "
-                                              "defects'); it will be unscored")
+                    self.get_logger().warning(f"fillet {fillet_id} removed: its chain blew up numerically "
+                                              "(a physics defect: please report it); it will be unscored")
             want_top = now + 1e-9 >= next_top
             want_side, poses = False, None
             if self.side_period is not None and now + 1e-9 >= next_side:

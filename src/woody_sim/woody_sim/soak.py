@@ -8,7 +8,10 @@ the default settings cannot pass it:
 * stiffness k in SOAK_K, total mass M over SOAK_MASSES (the calibration's range),
 * 100 and 130 FPM, 1 to 6 lanes, fillets side by side (all lanes cross the
   roller together) or staggered,
-* built-in real meshes and generated ones.
+* built-in real meshes and generated ones,
+* one wave of fillets per world, or several waves through the same world, as
+  in a running line: later chains are built after earlier ones were removed,
+  which is what once broke pybullet's cached mass matrices (docs/physics.md).
 
 Each batch is one LineWorld with one condition; a blow-up is a segment faster
 than ``BLOWUP_SPEED`` or a non-finite state (LineWorld removes such a fillet
@@ -35,8 +38,11 @@ SOAK_MASSES = (2.0, 10.0, 30.0, 100.0, 300.0)
 """kg: a decade either side of the calibrated masses (woody calibrate searches inside this range)."""
 SOAK_SPEEDS_FPM = (100.0, 130.0)
 SOAK_LANES = (1, 3, 6)
+SOAK_WAVES = (1, 3)
 SPAWN_GAP_S = 0.25
 """Staggered batches spawn one fillet per lane this far apart (s)."""
+WAVE_GAP_S = 1.0
+"""A wave starts this long (s) after the previous one, when that one has mostly left the roller."""
 BATCH_TIMEOUT_S = 12.0
 FREE_FALL_MARGIN = 0.02
 """A passage ends once every segment is this far (m) below the roller's lowest point: no contact is left,
@@ -45,7 +51,7 @@ only the free fall, which the soak need not pay for."""
 
 @dataclass(frozen=True)
 class SoakCondition:
-    """One batch: ``lanes`` fillets of one mesh at one k, mass and speed, side by side or staggered."""
+    """One batch: ``waves`` x ``lanes`` fillets of one mesh at one k, mass and speed, side by side or staggered."""
 
     mesh: int
     k: float
@@ -53,6 +59,12 @@ class SoakCondition:
     speed_fpm: float
     lanes: int
     staggered: bool
+    waves: int = 1
+
+    def spawn_times(self) -> list[tuple[float, int]]:
+        """(time s, lane) of every fillet of the batch, in time order."""
+        return sorted((wave * WAVE_GAP_S + (lane * SPAWN_GAP_S if self.staggered else 0.0), lane)
+                      for wave in range(self.waves) for lane in range(self.lanes))
 
 
 @dataclass
@@ -72,7 +84,8 @@ class SoakResult:
 
 def conditions(n_meshes: int, seed: int = 0) -> Iterator[SoakCondition]:
     """An endless shuffled cycle over the whole condition grid (reproducible from ``seed``)."""
-    grid = list(itertools.product(range(n_meshes), SOAK_K, SOAK_MASSES, SOAK_SPEEDS_FPM, SOAK_LANES, (False, True)))
+    grid = list(itertools.product(range(n_meshes), SOAK_K, SOAK_MASSES, SOAK_SPEEDS_FPM, SOAK_LANES, (False, True),
+                                  SOAK_WAVES))
     rng = np.random.default_rng(seed)
     while True:
         for i in rng.permutation(len(grid)):
@@ -87,7 +100,7 @@ def run_batch(condition: SoakCondition, mesh: FilletMesh,
     speed = fpm_to_mps(condition.speed_fpm)
     worst = 0.0
     with LineWorld(geometry, config) as world:
-        pending = [(lane * SPAWN_GAP_S if condition.staggered else 0.0, lane) for lane in range(condition.lanes)]
+        pending = condition.spawn_times()
         while (pending or world.fillets) and world.time < BATCH_TIMEOUT_S:
             while pending and world.time >= pending[0][0]:
                 world.spawn(mesh, condition.k, pending.pop(0)[1], condition.mass, speed)
@@ -96,7 +109,7 @@ def run_batch(condition: SoakCondition, mesh: FilletMesh,
                 if world.is_dynamic(fid):
                     worst = max(worst, float(np.abs(world.segment_velocities(fid)).max()))
             world.take_removed()
-        return condition.lanes, len(world.blown_up), worst, world.time
+        return condition.lanes * condition.waves, len(world.blown_up), worst, world.time
 
 
 def soak(meshes: list[FilletMesh], passages: int, seed: int = 0, config: PhysicsConfig | None = None,
