@@ -45,6 +45,7 @@ import numpy as np
 import pybullet as p
 
 from woody_common.calibration import Calibration, load_calibration
+from woody_sim.belt_drive import belt_drive
 from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
 from woody_sim.hinge_law import chain_mass_matrix, hinge_state, implicit_hinge_torque
 from woody_sim.line_geometry import LineGeometry
@@ -162,26 +163,6 @@ def _check_positive_finite(name: str, value: float) -> float:
     if not math.isfinite(value) or value <= 0.0:
         raise ValueError(f"{name} must be a positive finite number, got {value}")
     return value
-
-
-def _capped_drives(velocity: np.ndarray, normal: np.ndarray, speed: float, mass_rate: np.ndarray,
-                   normal_force: np.ndarray, cfg: PhysicsConfig) -> np.ndarray:
-    """The seed's drive forces (n, 3) on n touching segments: m (V_line - v) / dt in each contact's tangent plane.
-
-    V_line is the belt velocity (``speed`` along +x) everywhere, as in the
-    seed: on the flat belt it is the belt's own motion; on the roller only its
-    projection on the tangent plane pulls, which shrinks as the roller curves
-    down, so a segment is let go by geometry, with no explicit release test.
-    ``normal`` holds the conveyor's outward unit normals, ``mass_rate`` m / dt.
-    A force above mu_static N is cut to mu_dynamic N (sliding).
-    """
-    slip = velocity - np.array([speed, 0.0, 0.0])
-    slip -= np.einsum("ij,ij->i", slip, normal)[:, None] * normal
-    force = -mass_rate[:, None] * slip
-    size = np.sqrt(np.einsum("ij,ij->i", force, force))
-    sliding = size > cfg.friction_static * normal_force
-    force[sliding] *= (cfg.friction_dynamic * normal_force[sliding] / size[sliding])[:, None]
-    return force
 
 
 def segment_inertias(model: FilletModel, floor: float) -> np.ndarray:
@@ -455,11 +436,9 @@ class LineWorld:
         fillet.torque = torque
         fillet.rate = rate
         p.setJointMotorControlArray(fillet.body, joints, p.TORQUE_CONTROL, forces=torque.tolist(), physicsClientId=c)
-        for i in np.flatnonzero(fillet.drive.any(axis=1)):
-            p.applyExternalForce(
-                fillet.body, int(i) - 1, fillet.drive[i].tolist(), fillet.state[i, :3].tolist(),
-                p.WORLD_FRAME, physicsClientId=c,
-            )
+        driven = np.flatnonzero(fillet.drive.any(axis=1))
+        for i, force, point in zip(driven.tolist(), fillet.drive[driven].tolist(), fillet.state[driven, :3].tolist()):
+            p.applyExternalForce(fillet.body, i - 1, force, point, p.WORLD_FRAME, physicsClientId=c)
 
     def _implicit_torque(self, fillet: _Fillet, theta: np.ndarray, rate: np.ndarray) -> np.ndarray:
         """Backward-Euler hinge torques (:func:`~woody_sim.hinge_law.implicit_hinge_torque`) from the chain's
@@ -470,14 +449,12 @@ class LineWorld:
         return implicit_hinge_torque(mass, theta, rate, fillet.rate, fillet.torque, fillet.info.k, cfg.damping, cfg.dt)
 
     def _update_drive(self, dynamic: list[_Fillet]) -> None:
-        """The seed's belt drive on every touching segment (:func:`_capped_drives`), capped by Coulomb friction.
+        """The seed's belt drive on every touching segment (:func:`~woody_sim.belt_drive.belt_drive`).
 
         The force may not exceed mu_static N (else it slides at mu_dynamic N), N
         being the segment's low-pass filtered contact normal force, so a segment
         the roller no longer presses on gets no drive.
         """
-        for fillet in dynamic:
-            fillet.drive[:] = 0.0
         if not dynamic:
             return
         # contact[7] points from the fillet to the conveyor; contact[9] is the normal force (N)
@@ -487,26 +464,10 @@ class LineWorld:
         cfg = self.config
         blend = min(1.0, cfg.dt / cfg.normal_force_tau)
         for fillet in dynamic:
-            fillet.normal_force *= 1.0 - blend
             mine = rows[rows[:, 0] == fillet.body]
-            if len(mine):
-                self._drive_fillet(fillet, mine[:, 1].astype(int), mine[:, 2:], blend)
-
-    def _drive_fillet(self, fillet: _Fillet, segments: np.ndarray, contacts: np.ndarray, blend: float) -> None:
-        """Sum each touching segment's contact normals and forces, filter N, and set its capped drive."""
-        n = fillet.model.n_segments
-        force = np.bincount(segments, contacts[:, 2], n)
-        nx = -np.bincount(segments, contacts[:, 2] * contacts[:, 0], n)
-        nz = -np.bincount(segments, contacts[:, 2] * contacts[:, 1], n)
-        touched = np.unique(segments)
-        fillet.normal_force[touched] += blend * force[touched]
-        norm = np.hypot(nx[touched], nz[touched])
-        touched, norm = touched[norm > 0.0], norm[norm > 0.0]
-        normal = np.column_stack([nx[touched] / norm, np.zeros(len(touched)), nz[touched] / norm])
-        fillet.drive[touched] = _capped_drives(
-            fillet.state[touched, 7:10], normal, fillet.info.speed_mps, fillet.model.masses[touched] / self.config.dt,
-            fillet.normal_force[touched], self.config,
-        )
+            belt_drive(mine[:, 1].astype(np.int64), mine[:, 2:], fillet.state[:, 7:10], fillet.model.masses,
+                       fillet.info.speed_mps, cfg.dt, blend, cfg.friction_static, cfg.friction_dynamic,
+                       fillet.normal_force, fillet.drive)
 
     def _read_state(self, fillet: _Fillet) -> None:
         """One batched query for every link's pose and velocity (segment frames = centre-of-mass frames)."""
