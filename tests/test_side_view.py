@@ -214,6 +214,20 @@ def test_thinning_equals_the_textbook_algorithm_pixel_for_pixel():
         assert np.array_equal(zhang_suen_thinning(mask), textbook_thinning(mask)), f"mask {i}"
 
 
+def test_silhouette_outline_is_smooth_so_a_stair_stepped_bend_keeps_its_bending_energy():
+    """The seed's blur and closing: a bend drawn in 4-pixel stair steps (a coarse render, a folded chain's
+    slices) has the bending energy of the same bend drawn smoothly, not one inflated by skeleton spurs."""
+    xs = np.arange(250, 700)
+    centre_y = 330.0 + 0.0015 * (xs - 475.0) ** 2
+    smooth, stepped = SCENE.background().copy(), SCENE.background().copy()
+    for x, y in zip(xs, centre_y):
+        smooth[int(y) - 12:int(y) + 12, x] = (230, 150, 130)
+        step_y = 4 * round(y / 4)
+        stepped[step_y - 12:step_y + 12, x - x % 4:x - x % 4 + 4] = (230, 150, 130)
+    bends = [bending_energy(silhouette(image, SCENE.background())) for image in (smooth, stepped)]
+    assert bends[1] == pytest.approx(bends[0], rel=0.15)
+
+
 def test_bending_energy_zero_for_straight_and_growing_with_curvature():
     assert bending_energy(strip_mask(0.0)) < 1e-6
     line = np.zeros((50, 200), np.uint8)
