@@ -41,6 +41,7 @@ def test_sweep_cli_rows_report_resume(tmp_path):
                     for lane in range(3)}
     _check_rows(rows)
     _check_report(out)
+    _check_docs(out, tmp_path / "docs")
     _check_traces(out, rows, keys)
     _check_resume(out, keys)
 
@@ -73,6 +74,19 @@ def _check_report(out):
     assert "**PASS**" in md or "**MISS**" in md
     for name in sweep_report.PLOTS:
         assert (out / name).stat().st_size > 1000
+
+
+def _check_docs(out, docs):
+    """--docs: results.md keeps its hand-written discussion; the plots and the raw runs.csv are replaced."""
+    (docs / "results").mkdir(parents=True)
+    (docs / "results.md").write_text("old figures\n<!-- discussion -->\nwhat the misses mean\n")
+    (docs / "results" / "runs.csv").write_text("stale\n")
+    sweep_report.build(out, docs=docs)
+    md = (docs / "results.md").read_text()
+    assert "old figures" not in md and md.endswith("<!-- discussion -->\nwhat the misses mean\n")
+    assert (docs / "results" / "runs.csv").read_text() == (out / "runs.csv").read_text()
+    for name in sweep_report.PLOTS:
+        assert (docs / "results" / name).stat().st_size > 1000
 
 
 def _check_traces(out, rows, keys):

@@ -451,9 +451,10 @@ def _targets_and_plots(checks: list) -> list[str]:
 
 
 def _write_docs(out: Path, docs: Path, text: str) -> None:
-    """docs/results.md (keeping its hand-written discussion below the marker) and docs/results/*.png."""
+    """docs/results.md (keeping its hand-written discussion below the marker), docs/results/*.png and the
+    raw docs/results/runs.csv the figures come from."""
     (docs / "results").mkdir(parents=True, exist_ok=True)
-    for name in PLOTS:
+    for name in (*PLOTS, "runs.csv"):
         if (out / name).exists():
             shutil.copy(out / name, docs / "results" / name)
     target = docs / "results.md"
