@@ -4,9 +4,9 @@ For each mesh, total mass M and stiffness k, one fillet rides to the roller
 edge and falls; the centre-of-mass trajectory and the total bend angle (sum
 of hinge angles) are sampled every 5 ms and compared with the reference run:
 the same formulation at a step ten times smaller or more (``--ref-dt``). With
-the calibrated damper (c = 0.2 N m s/rad) an explicit spring-damper would need
-a step below 1e-7 s on the lightest tip slices (2 I / c), so the reference is
-the implicit hinge at a small step, whose error vanishes with the step.
+the calibrated damper (c = 0.1-0.2 N m s/rad) an explicit spring-damper would
+need a step below 1e-7 s on the lightest tip slices (2 I / c), so the reference
+is the implicit hinge at a small step, whose error vanishes with the step.
 
     .venv/bin/python tools/validate_physics.py [--meshes builtin] [--masses 5 20 100] [--ks 0 100 400]
 
