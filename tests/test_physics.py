@@ -188,6 +188,16 @@ def test_soak_of_a_few_hundred_passages_has_no_blow_up():
     assert result.worst_speed_mps < 6.0
 
 
+def test_soak_waves_send_each_lane_a_fillet_per_wave_in_time_order():
+    from woody_sim.soak import SPAWN_GAP_S, WAVE_GAP_S, SoakCondition
+
+    staggered = SoakCondition(mesh=0, k=0.0, mass=20.0, speed_fpm=100.0, lanes=3, staggered=True, waves=2)
+    assert staggered.spawn_times() == [(0.0, 0), (SPAWN_GAP_S, 1), (2 * SPAWN_GAP_S, 2), (WAVE_GAP_S, 0),
+                                       (WAVE_GAP_S + SPAWN_GAP_S, 1), (WAVE_GAP_S + 2 * SPAWN_GAP_S, 2)]
+    side_by_side = SoakCondition(mesh=0, k=0.0, mass=20.0, speed_fpm=100.0, lanes=2, staggered=False)
+    assert side_by_side.spawn_times() == [(0.0, 0), (0.0, 1)]
+
+
 def test_inertia_floor_raises_only_the_thin_slices_hinge_axis(fillet: FilletMesh) -> None:
     model = build_fillet_model(fillet, total_mass=20.0)
     bare, floored = segment_inertias(model, 0.0), segment_inertias(model, 0.1)
