@@ -45,7 +45,8 @@ def implicit_hinge_torque(mass: np.ndarray, theta: np.ndarray, rate: np.ndarray,
     """Hinge torque tau = -k theta' - c theta_dot' evaluated at the end of the step (backward Euler).
 
     ``mass`` is a (6 + n, 6 + n) mass matrix of a floating-base chain with n
-    hinges (:func:`chain_mass_matrix`, or pybullet's: any base coordinates).
+    hinges in any base coordinates (:func:`chain_mass_matrix`; pybullet's only for a
+    body in a world that has removed none, see :func:`chain_mass_matrix`).
     With the base eliminated (Schur complement) it is S, and
     theta_dot' = theta_dot + dt S^-1 (tau + tau_ext). tau_ext, every other
     torque on the hinges (contacts, drive, limits), is observed from the

@@ -442,8 +442,9 @@ class LineWorld:
 
     def _implicit_torque(self, fillet: _Fillet, theta: np.ndarray, rate: np.ndarray) -> np.ndarray:
         """Backward-Euler hinge torques (:func:`~woody_sim.hinge_law.implicit_hinge_torque`) from the chain's
-        mass matrix in its current pose (:func:`~woody_sim.hinge_law.chain_mass_matrix`, equal to pybullet's
-        ``calculateMassMatrix`` in the joint block once the base is eliminated)."""
+        mass matrix in its current pose (:func:`~woody_sim.hinge_law.chain_mass_matrix`; pybullet's
+        ``calculateMassMatrix`` agrees in the joint block once the base is eliminated, but only until a world
+        removes a chain, after which it can return another chain's: docs/physics.md)."""
         cfg = self.config
         mass = chain_mass_matrix(fillet.state, fillet.model.masses, fillet.inertias, fillet.joint_offsets)
         return implicit_hinge_torque(mass, theta, rate, fillet.rate, fillet.torque, fillet.info.k, cfg.damping, cfg.dt)
