@@ -216,3 +216,17 @@ def test_a_topic_recorded_with_an_older_woody_msgs_definition_is_skipped_with_on
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith(f"replay: skipping {TRACKS}: recorded with an older woody_msgs/msg/FilletTrackArray")
     assert err[1:] == [f"replay: {bag}: nothing playable in the selected topics"]
+
+
+def test_every_publisher_the_clock_included_waits_for_its_last_messages_to_be_acknowledged(
+        ros_domain, tmp_path, monkeypatch):
+    from rclpy.publisher import Publisher
+
+    acknowledged = []
+    monkeypatch.setattr(Publisher, "wait_for_all_acked", lambda self, timeout: acknowledged.append(self.topic_name))
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain))
+    bag = write_bag(tmp_path / "line.mcap")
+    parser = argparse.ArgumentParser()
+    replay.add_arguments(parser)
+    assert replay.run(parser.parse_args([str(bag), "--rate", "10", "--keep-live", "--quiet"])) == 0
+    assert sorted(acknowledged) == sorted(["/clock", TRACKS, VERDICTS])

@@ -318,13 +318,18 @@ class _Player:
                 warned = True
             if not self.args.loop or played == 0:
                 break
-        for publisher in self.publishers.values():
-            from rclpy.duration import Duration
-
-            publisher.wait_for_all_acked(Duration(seconds=1.0))
+        self._wait_for_delivery()
         self.say(f"{'stopped' if self.stop else 'done'}: {self.count} messages"
                  f"{f' in {passes} passes' if passes > 1 else ''}, {time.monotonic() - started:.1f} s")
         return 0
+
+    def _wait_for_delivery(self) -> None:
+        """Let reliable subscribers acknowledge the last messages, /clock included, before the process exits."""
+        from rclpy.duration import Duration
+
+        publishers = [*self.publishers.values(), *([self.clock_publisher] if self.clock_publisher else [])]
+        for publisher in publishers:
+            publisher.wait_for_all_acked(Duration(seconds=1.0))
 
     def _play_once(self) -> tuple[int, str | None]:
         t0_bag = t0_wall = None
