@@ -26,6 +26,7 @@ from std_msgs.msg import Header
 
 from woody_common import topics
 from woody_common.calibration import load_calibration
+from woody_common.images import image_message
 from woody_common.line import LANES, SPEED_RANGE_FPM, fpm_to_mps
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
@@ -217,14 +218,14 @@ class LineSim(Node):
         if frames.top_rgb is not None and not self.sensor.drop(self.sensor_rng):
             header = self._header(TOP_FRAME, stamp)
             depth = to_message_array(self.sensor.depth(frames.top_depth, self.sensor_rng), self.sensor.encoding)
-            self.color_pub.publish(_image(self.sensor.color(frames.top_rgb, self.sensor_rng), "rgb8", header))
-            self.depth_pub.publish(_image(depth, self.sensor.encoding, header))
+            self.color_pub.publish(image_message(self.sensor.color(frames.top_rgb, self.sensor_rng), "rgb8", header))
+            self.depth_pub.publish(image_message(depth, self.sensor.encoding, header))
             self.top_info.header = header
             self.color_info_pub.publish(self.top_info)
             self.depth_info_pub.publish(self.top_info)
         if frames.side_rgb is not None:
             header = self._header(SIDE_FRAME, stamp)
-            self.side_pub.publish(_image(frames.side_rgb, "rgb8", header))
+            self.side_pub.publish(image_message(frames.side_rgb, "rgb8", header))
             self.side_info.header = header
             self.side_info_pub.publish(self.side_info)
 
@@ -310,15 +311,6 @@ class LineSim(Node):
     def close(self) -> None:
         self.renderer.close()
         self.world.close()
-
-
-def _image(array: np.ndarray, encoding: str, header: Header) -> Image:
-    """A sensor_msgs/Image (REP 118 encodings rgb8 / 32FC1 / 16UC1) from a contiguous numpy array."""
-    array = np.ascontiguousarray(array)
-    msg = Image(header=header, height=array.shape[0], width=array.shape[1], encoding=encoding, is_bigendian=0,
-                step=array.strides[0])
-    msg.data = array.tobytes()
-    return msg
 
 
 def _camera_pose(camera) -> PoseStamped:

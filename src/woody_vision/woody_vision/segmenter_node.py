@@ -23,6 +23,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Empty
 
 from woody_common import topics
+from woody_common.images import image_message
 from woody_common.line import LANE_PITCH_M, LANES, TOP_CAMERA_HEIGHT_M
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import stamp_to_seconds
@@ -216,10 +217,7 @@ class Segmenter(Node):
             label = f"{track.track_id} L{track.lane}" + (f" {score}" if score is not None else "")
             u, v = (int(c) for c in track.blob.centroid)
             cv2.putText(canvas, label, (u - 20, v), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1)
-        out = Image(header=depth_msg.header, height=canvas.shape[0], width=canvas.shape[1], encoding="rgb8",
-                    step=canvas.shape[1] * 3)
-        out.data = canvas.tobytes()
-        self.debug_pub.publish(out)
+        self.debug_pub.publish(image_message(canvas, "rgb8", depth_msg.header))
 
     def close(self) -> None:
         print(f"[segmenter] {self.frames} depth frames received, {self.checker.rejected} rejected"

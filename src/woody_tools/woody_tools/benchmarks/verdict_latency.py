@@ -108,7 +108,10 @@ def _wait_for_vision(executor, depth_pub, info_pub) -> None:
 def _publish_frames(scene, seconds: float, loop_s: float, publishers, published: dict[int, float]) -> None:
     """Publish /clock, camera_info and the depth image of each frame at the frame rate; note when each went out."""
     from rosgraph_msgs.msg import Clock
-    from sensor_msgs.msg import CameraInfo, Image
+    from sensor_msgs.msg import CameraInfo
+    from std_msgs.msg import Header
+
+    from woody_common.images import image_message
 
     clock_pub, info_pub, depth_pub = publishers
     info = CameraInfo(width=scene.width, height=scene.height, distortion_model="plumb_bob")
@@ -123,9 +126,7 @@ def _publish_frames(scene, seconds: float, loop_s: float, publishers, published:
         clock_pub.publish(clock)
         info.header.stamp = clock.clock
         info_pub.publish(info)
-        image = Image(height=scene.height, width=scene.width, encoding="32FC1", step=scene.width * 4)
-        image.header.stamp = clock.clock
-        image.data = np.ascontiguousarray(depth, np.float32).tobytes()
+        image = image_message(np.asarray(depth, np.float32), "32FC1", Header(stamp=clock.clock))
         published[key] = time.monotonic()
         depth_pub.publish(image)
         time.sleep(max(0.0, start + (i + 1) / FRAME_RATE_HZ - time.monotonic()))
