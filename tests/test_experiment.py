@@ -34,3 +34,44 @@ def test_the_colour_outline_keeps_a_stiff_fillet_woody_through_stereo_noise(monk
     (depth_only,) = evaluate_run(spec, mesh)
     threshold = load_calibration().phi_threshold
     assert with_colour["phi"] < threshold < depth_only["phi"], (with_colour, depth_only)
+
+
+def test_a_three_lane_run_simulates_one_chain_and_scores_every_lane_from_its_own_perspective(monkeypatch):
+    from woody_sim.line_world import LineWorld
+
+    spawned = []
+    spawn = LineWorld.spawn
+    monkeypatch.setattr(LineWorld, "spawn", lambda self, *a, **kw: spawned.append(kw["lane"]) or spawn(self, *a, **kw))
+    mesh = load_mesh_set("builtin")[0][0]
+    rows = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, side=False), mesh)
+    assert spawned == [1]  # the watched (centre) lane
+    assert [r["status"] for r in rows] == ["scored"] * 3, rows
+    phis = [r["phi"] for r in rows]
+    assert len(set(phis)) == 3 and max(phis) < 1.3 * min(phis), phis  # same bend, three perspectives
+
+
+def test_lane_copies_are_the_chain_shifted_across_the_belt_and_leave_with_it():
+    import numpy as np
+
+    from woody_sim.line_geometry import LineGeometry
+    from woody_sim.line_world import LineWorld
+    from woody_sim.rendering import LineRenderer
+    from woody_tools.experiment import _LaneCopies
+
+    geometry = LineGeometry(lanes=3)
+    renderer = LineRenderer(geometry, render_top=True, render_side=False)
+    mesh = load_mesh_set("builtin")[0][0]
+    with LineWorld(geometry) as world:
+        fid = world.spawn(mesh, k=0.0, lane=geometry.watched_lane, mass=20.0, speed_mps=0.5)
+        lanes = _LaneCopies(world, renderer, geometry, fid)
+        for _ in range(50):
+            world.step()
+        chain = world.segment_poses()[fid]
+        poses = lanes.poses()
+        assert set(poses) == set(renderer.fillet_ids) and len(poses) == 3
+        for lane, render_id in enumerate((_LaneCopies.COPY_ID_BASE, fid, _LaneCopies.COPY_ID_BASE + 2)):
+            shifted = chain.copy()
+            shifted[:, 1] += geometry.lane_y(lane) - geometry.lane_y(1)
+            np.testing.assert_array_equal(poses[render_id], shifted)
+        lanes.remove()
+        assert renderer.fillet_ids == [] and lanes.poses() == {}

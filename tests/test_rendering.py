@@ -9,6 +9,7 @@ import pytest
 
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.rendering import (
+    FRAMES_IN_FLIGHT,
     LineRenderer,
     RenderProcess,
     camera_info_fields,
@@ -102,20 +103,24 @@ def test_render_process_matches_in_process_renderer(geometry, reference):
     assert np.array_equal(frames.side_rgb, local.render_side(poses))
 
 
-def test_render_process_keeps_two_frames_in_flight_in_order(geometry, reference):
+def test_render_process_keeps_its_frames_in_flight_in_order(geometry, reference):
     visuals, offsets = reference
     near, far = ({3: flat_poses(offsets, x, geometry.lane_y(1))} for x in (-0.05, -0.3))
     local = LineRenderer(geometry)
     local.add_fillet(3, 1, visuals)
+    assert FRAMES_IN_FLIGHT >= 2
     with RenderProcess(geometry) as remote:
         remote.add_fillet(3, 1, visuals)
         remote.submit(near, want_top=True, want_side=False)
         remote.submit(far, want_top=True, want_side=True)
+        for _ in range(FRAMES_IN_FLIGHT - 2):
+            remote.submit(near, want_top=True, want_side=False)
         assert not remote.can_submit
         with pytest.raises(RuntimeError, match="already in flight"):
             remote.submit(near)
-        first, second = remote.collect(), remote.collect()
+        first, second, *rest = (remote.collect() for _ in range(FRAMES_IN_FLIGHT))
         assert not remote.busy
+    assert all(np.array_equal(frame.top_depth, first.top_depth) for frame in rest)
     assert np.array_equal(first.top_depth, local.render_top(near)[1]) and first.side_rgb is None
     assert np.array_equal(second.top_depth, local.render_top(far)[1])
     assert np.array_equal(second.side_rgb, local.render_side(far))

@@ -79,8 +79,9 @@ __all__ = [
     "visuals_from_mesh",
 ]
 
-FRAMES_IN_FLIGHT = 2
-"""Frames a :class:`RenderProcess` renders ahead of collection (one shared buffer set each)."""
+FRAMES_IN_FLIGHT = 3
+"""Frames a :class:`RenderProcess` renders ahead of collection (one shared buffer set each). Three, not two: with
+two, line_sim waited ~4 % of its wall time for a frame while both were in flight (session 6)."""
 
 # --------------------------------------------------------------------------- colours
 # Base (unlit) colours. Lambert shading multiplies them by AMBIENT + DIFFUSE * cos.

@@ -3,8 +3,16 @@
 `woody sweep` and `woody calibrate` call :func:`evaluate_run` in worker
 processes. It drives the same modules the nodes use — LineWorld (pybullet),
 LineRenderer, segmentation, tracking, FilletGrader (Φ) and
-SidePassageTracker (NMDM, MDM, BE) — but renders only the frames the scores
-need:
+SidePassageTracker (NMDM, MDM, BE) — but simulates and renders only what the
+scores need:
+
+* one chain, in the watched lane: the other lanes show copies of it shifted
+  across the belt (:class:`_LaneCopies`). The lanes of a run are the same
+  fillet spawned at the same moment on a belt and roller that are uniform
+  across the lanes, so what tells them apart is the top camera's
+  perspective, and that is still rendered and scored per lane. (Three
+  independent chains drift 2-9 mm apart during a run through rounding in
+  pybullet's contacts alone; simulating one costs a third.)
 
 * top-down frames at the camera rate ``TOP_RATE_HZ`` (on the absolute time
   grid) only once some fillet's leading end is within ``TOP_START_X`` of the
@@ -132,7 +140,9 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     n_top = 0
     try:
         top = _TopView(spec, geometry, top_bg) if spec.top else None
-        watched_fid = _spawn_lanes(world, renderer, spec, mesh, mass, speed, geometry.watched_lane)
+        lanes = _LaneCopies(world, renderer, geometry, world.spawn(mesh, k=spec.k, lane=geometry.watched_lane,
+                                                                   mass=mass, speed_mps=speed))
+        watched_fid = lanes.fillet_id
         side = _SideView(geometry, side_bg, side_rate_hz, watched_fid) if spec.side else None
         model = world.model(watched_fid)
         lead_offset = float(model.box_centers[-1, 0] + model.box_half_extents[-1, 0])
@@ -140,18 +150,18 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
         top_done = top is None
         while world.time < MAX_SIM_S and world.fillets:
             now = world.step()
-            for fid in world.take_removed():
-                renderer.remove_fillet(fid)
+            if world.take_removed():
+                lanes.remove()
             poses = None
             if not top_done and now + 1e-9 >= next_top:
                 next_top += top_dt * max(1, math.floor((now + 1e-9 - next_top) / top_dt) + 1)
                 if top_start_x is None or n_top or SPAWN_X + speed * now + lead_offset >= top_start_x:
-                    poses = world.segment_poses()
+                    poses = lanes.poses()
                     top.on_frame(*renderer.render_top(poses), now)
                     n_top += 1
                     top_done = len(top.results) >= spec.lanes
             if side is not None and side.due(now):
-                side.on_step(world, renderer, poses, now)
+                side.on_step(world, renderer, poses or lanes.poses(), now)
             if top_done and (side is None or side.result is not None):
                 break
         if side is not None:
@@ -165,16 +175,40 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                       side.result if side is not None else None)
 
 
-def _spawn_lanes(world: LineWorld, renderer, spec: RunSpec, mesh: FilletMesh, mass: float, speed: float,
-                 watched: int) -> int:
-    """One fillet per lane, all at once; returns the watched lane's fillet id."""
-    watched_fid = None
-    for lane in range(spec.lanes):
-        fid = world.spawn(mesh, k=spec.k, lane=lane, mass=mass, speed_mps=speed)
-        renderer.add_fillet(fid, lane, world.model(fid).visuals)
-        if lane == watched:
-            watched_fid = fid
-    return watched_fid
+class _LaneCopies:
+    """The run's fillet in every lane: one chain in the watched lane, posed into the others shifted across the belt.
+
+    Render ids: the chain's own in its lane, ``COPY_ID_BASE + lane`` for the copies.
+    """
+
+    COPY_ID_BASE = 1_000_000
+
+    def __init__(self, world: LineWorld, renderer, geometry: LineGeometry, fillet_id: int) -> None:
+        self.world, self.renderer, self.fillet_id = world, renderer, fillet_id
+        watched = geometry.watched_lane
+        self.shifts: dict[int, float] = {}
+        """Render id -> its lane's offset (m) across the belt from the chain's lane."""
+        for lane in range(geometry.lanes):
+            render_id = fillet_id if lane == watched else self.COPY_ID_BASE + lane
+            renderer.add_fillet(render_id, lane, world.model(fillet_id).visuals)
+            self.shifts[render_id] = geometry.lane_y(lane) - geometry.lane_y(watched)
+
+    def poses(self) -> dict[int, np.ndarray]:
+        """Segment poses of every lane's copy (empty once the chain is gone)."""
+        chain = self.world.segment_poses().get(self.fillet_id)
+        if chain is None:
+            return {}
+        out = {}
+        for render_id, shift in self.shifts.items():
+            out[render_id] = chain.copy()
+            out[render_id][:, 1] += shift
+        return out
+
+    def remove(self) -> None:
+        """The chain left the world: so do its copies."""
+        for render_id in self.shifts:
+            self.renderer.remove_fillet(render_id)
+        self.shifts = {}
 
 
 class _TopView:
