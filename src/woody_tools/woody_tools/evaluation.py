@@ -1,7 +1,8 @@
 """Honest classification figures: per mesh set, one vote per run, Wilson intervals, leave-one-mesh-out.
 
-The lanes of one run carry the same mesh at the same k and speed; they differ
-only by the camera's perspective, so they are not independent samples. Here a
+The lanes of one run carry the same mesh at the same k and speed (one
+simulated chain, posed into every lane: ``experiment._LaneCopies``); they
+differ only by the camera's perspective, so they are not independent samples. Here a
 *unit* is one run (mesh × k × speed × mass) and its Φ is the median over its
 scored lanes: with three lanes that is the lane majority's vote. Accuracy is
 counted over units, with a 95 % Wilson score interval, and every figure says

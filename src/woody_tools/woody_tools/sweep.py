@@ -64,7 +64,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "0..100 and side-view 0,10,100,200,400)")
     parser.add_argument("--speeds", type=_floats, default=list(DEFAULT_SPEEDS),
                         help="line speeds in FPM (default 100,130)")
-    parser.add_argument("--lanes", type=int, default=3, help="identical fillets side by side per run (default 3)")
+    parser.add_argument("--lanes", type=int, default=3,
+                        help="identical fillets side by side per run: one simulated chain, seen in every lane "
+                             "(default 3)")
     parser.add_argument("--out", default="sweep-out", help="output folder (runs.csv, results.md, *.png)")
     parser.add_argument("--mass", type=float, default=None,
                         help="total chain mass M in kg (default: the calibrated one, config/calibration.yaml)")
