@@ -43,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
     figures = {"reference_ms": reference, **with_reference(figures, 0.5 * (reference + reference_ms()))}
     width = max(len(k) for k in figures)
     for key, value in figures.items():
-        print(f"{key:<{width}}  {value:.3f}" if isinstance(value, float) else f"{key:<{width}}  {value}")
+        # 4 significant digits: a rate per reference workload is ~0.002 and would round away with fixed decimals
+        print(f"{key:<{width}}  {value:.4g}" if isinstance(value, float) else f"{key:<{width}}  {value}")
     if args.json_path:
         Path(args.json_path).write_text(json.dumps(figures, indent=2) + "\n")
         print(f"wrote {args.json_path}")
