@@ -28,7 +28,7 @@ from woody_tools import cluster
 from woody_tools.experiment import RunSpec
 
 DASK = Path(sys.executable).parent / "dask"
-GRID = ["--meshes", "generated:1:7", "--k", "0,100", "--speeds", "100", "--lanes", "1", "--no-report"]
+GRID = ["--meshes", "generated:1:7", "--k", "0,50,100", "--speeds", "100", "--lanes", "1", "--no-report"]
 METRICS = ("phi", "hu_term", "solidity_term", "nmdm", "mdm", "be")
 REL_TOL = 1e-5
 
@@ -97,14 +97,14 @@ def test_scheduler_sweep_equals_local_and_resumes(dask_cluster, tmp_path):
     address, _ = dask_cluster
     local = _woody("sweep", *GRID, "--jobs", "1", "--out", str(tmp_path / "local"))
     assert local.returncode == 0, local.stderr[-3000:]
-    remote = _woody("sweep", *GRID, "--scheduler", address, "--scaling-probe", "1", "--out", str(tmp_path / "remote"))
+    remote = _woody("sweep", *GRID, "--scheduler", address, "--scaling-probe", "2", "--out", str(tmp_path / "remote"))
     assert remote.returncode == 0, remote.stderr[-3000:]
     assert f"Dask scheduler {address}, 2 workers" in remote.stderr
     assert "woody sweep: dashboard http://127.0.0.1:" in remote.stderr
     assert "scaling efficiency" in remote.stderr and "each worker loaded each mesh once" in remote.stderr
 
     a, b = _rows(tmp_path / "local" / "runs.csv"), _rows(tmp_path / "remote" / "runs.csv")
-    assert len(a) == 2 and a.keys() == b.keys()
+    assert len(a) == 3 and a.keys() == b.keys()
     for key, row in a.items():
         assert row["status"] == b[key]["status"] == "scored", (row, b[key])
         for column in METRICS:
@@ -183,20 +183,23 @@ def test_task_loads_each_mesh_once_per_process(monkeypatch):
     assert cluster.worker_stats()["loads"] == {"generated:70001": 1}
 
 
-def test_probe_order_spreads_the_probe_over_the_grid():
-    runs = list(range(10))
+def test_probe_order_spreads_the_probe_over_the_first_mesh_s_runs():
+    runs = [RunSpec(mesh, k, 100.0) for mesh in ("a", "b") for k in range(6)]
     assert cluster.probe_order(runs, 0) == runs
     ordered = cluster.probe_order(runs, 3)
-    assert ordered[:3] == [0, 3, 6] and sorted(ordered) == runs
-    assert cluster.probe_order(runs, 10) == runs
+    assert [(r.mesh, r.k) for r in ordered[:3]] == [("a", 0), ("a", 2), ("a", 4)]
+    assert sorted(ordered, key=runs.index) == runs
+    assert [r.mesh for r in cluster.probe_order(runs, 8)[:6]] == ["a"] * 6  # no more than the first mesh has
+    assert cluster.probe_order(runs, 12) == runs
 
 
-def test_scaling_efficiency_compares_per_worker_rate_with_one_worker_alone():
-    stats = cluster.Throughput(evaluations=66, wall_s=40.0, workers=2, probe_evaluations=6, probe_s=10.0)
+def test_scaling_efficiency_compares_per_worker_rate_with_one_warm_worker_alone():
+    stats = cluster.Throughput(evaluations=69, wall_s=45.0, workers=2, warmup_evaluations=3, warmup_s=5.0,
+                               probe_evaluations=6, probe_s=10.0)
     assert stats.one_worker_per_min == pytest.approx(36.0)
-    assert stats.parallel_per_min_per_worker == pytest.approx(60.0 / 30.0 * 60.0 / 2)
+    assert stats.parallel_per_min_per_worker == pytest.approx(60.0 / 30.0 * 60.0 / 2)  # neither warm-up nor probe
     assert stats.efficiency == pytest.approx(60.0 / 36.0)
-    assert "scaling efficiency 167 %" in stats.summary()
+    assert "scaling efficiency 167 %" in stats.summary() and "one warm worker alone" in stats.summary()
     assert cluster.Throughput(evaluations=6, wall_s=3.0, workers=1).efficiency is None
 
 

@@ -40,7 +40,8 @@ from woody_tools.experiment import RunSpec
 WORKER_WAIT_S = 60.0
 """How long to wait for the first worker of an existing cluster."""
 DEFAULT_PROBE_RUNS = 4
-"""Runs evaluated one at a time before the parallel phase, the one-worker reference of the scaling efficiency."""
+"""Runs evaluated one at a time before the parallel phase, the one-worker reference of the scaling efficiency;
+the first only warms the worker up (its renderer, compiled kernels, the mesh) and is not timed."""
 
 MeshRef = tuple[str, str]
 Evaluate = Callable[[RunSpec, FilletMesh], list[dict]]
@@ -60,9 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser, jobs_default: int | None, pro
                         help="worker processes of the embedded LocalCluster (default: cores; ignored with --scheduler)")
     if probe:
         parser.add_argument("--scaling-probe", type=int, default=DEFAULT_PROBE_RUNS, metavar="RUNS",
-                            help="with more than one worker, evaluate this many runs one at a time first to "
-                                 "measure the one-worker rate for the scaling efficiency "
-                                 f"(default {DEFAULT_PROBE_RUNS}; 0: off)")
+                            help="with more than one worker, evaluate this many runs of one mesh one at a time "
+                                 "first to measure the one-worker rate for the scaling efficiency; the first only "
+                                 f"warms the worker up (default {DEFAULT_PROBE_RUNS}; 0 or 1: off)")
 
 
 # ---------------------------------------------------------------- worker side
@@ -173,6 +174,9 @@ class Throughput:
     evaluations: int = 0
     wall_s: float = 0.0
     workers: int = 1
+    warmup_evaluations: int = 0
+    warmup_s: float = 0.0
+    """The probe's first run: a cold worker, counted in neither rate of the efficiency."""
     probe_evaluations: int = 0
     probe_s: float = 0.0
     failed: list[str] = field(default_factory=list)
@@ -187,7 +191,8 @@ class Throughput:
 
     @property
     def parallel_per_min_per_worker(self) -> float | None:
-        wall, evals = self.wall_s - self.probe_s, self.evaluations - self.probe_evaluations
+        wall = self.wall_s - self.warmup_s - self.probe_s
+        evals = self.evaluations - self.warmup_evaluations - self.probe_evaluations
         return evals / wall * 60.0 / self.workers if wall > 0 and evals > 0 else None
 
     @property
@@ -200,8 +205,8 @@ class Throughput:
         text = f"{self.evaluations} fillet evaluations in {self.wall_s:.1f} s = {self.per_min:.0f} /min"
         if self.efficiency is not None:
             text += (f"; {self.workers} workers: {self.parallel_per_min_per_worker:.1f} /min/worker against "
-                     f"{self.one_worker_per_min:.1f} /min with one worker alone (first {self.probe_evaluations} "
-                     f"evaluations, same session): scaling efficiency {self.efficiency * 100:.0f} %")
+                     f"{self.one_worker_per_min:.1f} /min with one warm worker alone ({self.probe_evaluations} "
+                     f"evaluations of one mesh, same session): scaling efficiency {self.efficiency * 100:.0f} %")
         return text
 
     def as_meta(self) -> dict:
@@ -216,11 +221,16 @@ def _round(value: float | None) -> float | None:
 
 
 def probe_order(runs: list, probe: int) -> list:
-    """The runs with ``probe`` of them, spread over the grid, moved to the front."""
+    """The runs with ``probe`` of the first mesh's, spread over its k and speeds, moved to the front.
+
+    One mesh, loaded by the untimed first probe run, so the timed ones measure a warm worker (the parallel
+    phase loads each mesh once per worker among hundreds of runs).
+    """
     if probe <= 0 or probe >= len(runs):
         return list(runs)
-    step = len(runs) / probe
-    picked = sorted({int(i * step) for i in range(probe)})
+    first = [i for i, run in enumerate(runs) if run.mesh == runs[0].mesh]
+    step = len(first) / min(probe, len(first))
+    picked = sorted({first[int(i * step)] for i in range(min(probe, len(first)))})
     chosen = set(picked)
     return [runs[i] for i in picked] + [r for i, r in enumerate(runs) if i not in chosen]
 
@@ -229,8 +239,9 @@ def run_tasks(client, evaluate: Evaluate, runs: list[RunSpec], meshes: dict[str,
               on_rows: Callable[[list[dict]], None], desc: str, probe: int = 0) -> Throughput:
     """Evaluate every run on the cluster; ``on_rows`` gets each batch of finished rows on the client.
 
-    With ``probe`` > 0 and more than one worker, the first ``probe`` runs go
-    one at a time (one worker busy) to measure the one-worker rate. A task
+    With ``probe`` > 1 and more than one worker, the first ``probe`` runs go
+    one at a time (one worker busy) to measure the one-worker rate, all but
+    the first (the worker's warm-up) timed. A task
     that fails on the cluster (its mesh cannot be loaded there, or it killed
     workers) gives no rows and is listed in ``failed``.
     """
@@ -238,7 +249,7 @@ def run_tasks(client, evaluate: Evaluate, runs: list[RunSpec], meshes: dict[str,
 
     refs = {name: mesh_ref(mesh) for name, mesh in meshes.items()}
     stats = Throughput(workers=worker_count(client))
-    probe = probe if stats.workers > 1 and len(runs) > probe else 0
+    probe = probe if stats.workers > 1 and len(runs) > probe > 1 else 0
     tag = uuid.uuid4().hex[:8]
     start = time.perf_counter()
 
@@ -252,7 +263,11 @@ def run_tasks(client, evaluate: Evaluate, runs: list[RunSpec], meshes: dict[str,
 
         for i, run in enumerate(runs[:probe]):
             collect([submit(i, run)], batches=False)
-        stats.probe_evaluations, stats.probe_s = stats.evaluations, time.perf_counter() - start
+            if i == 0:
+                stats.warmup_evaluations, stats.warmup_s = stats.evaluations, time.perf_counter() - start
+        if probe:
+            stats.probe_evaluations = stats.evaluations - stats.warmup_evaluations
+            stats.probe_s = time.perf_counter() - start - stats.warmup_s
         collect([submit(i, run) for i, run in enumerate(runs[probe:], probe)], batches=True)
     stats.wall_s = time.perf_counter() - start
     return stats
