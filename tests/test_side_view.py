@@ -11,6 +11,7 @@ import pytest
 from woody_vision.side_view import (
     SidePassageTracker,
     bending_energy,
+    difference_mask,
     mdm,
     nmdm,
     silhouette,
@@ -246,3 +247,17 @@ def test_bending_energy_zero_for_straight_and_growing_with_curvature():
                             flags=cv2.INTER_NEAREST)
     assert bending_energy(turned) == pytest.approx(bending_energy(bent), rel=0.25), \
         "BE follows the tilt only through P², whose pixel-chain perimeter grows up to ~10 % on a diagonal"
+
+
+def test_the_difference_mask_sums_absolute_channel_differences_beyond_255_and_refuses_other_shapes():
+    rng = np.random.default_rng(4)
+    background = rng.integers(0, 256, (7, 9, 3), dtype=np.uint8)
+    image = rng.integers(0, 256, (7, 9, 3), dtype=np.uint8)
+    total = np.abs(image.astype(int) - background.astype(int)).sum(axis=2)
+    for threshold in (0, 40, 300, 700):
+        expected = np.where(total > threshold, 255, 0)
+        np.testing.assert_array_equal(difference_mask(image, background, threshold), expected)
+    strided = np.zeros((7, 18, 3), np.uint8)[:, ::2]  # a view with a row step, as a padded Image gives
+    assert not difference_mask(strided, np.zeros((7, 9, 3), np.uint8), 0).any()
+    with pytest.raises(ValueError, match="two \\(H, W, 3\\) images"):
+        difference_mask(image[..., 0], background[..., 0], 40)
