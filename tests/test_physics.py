@@ -229,7 +229,7 @@ def test_without_the_inertia_floor_heavy_stiff_chains_blow_up_on_the_roller():
         assert (passages, blown) == (6, 0) and worst < 6.0
 
 
-def run_digest() -> str:
+def run_digest(config: PhysicsConfig | None = None) -> str:
     """SHA-256 of every segment pose while three fillets cross the roller side by side, are taken off the line
     and three others follow (chains built where removed ones were, as in a running line)."""
     import hashlib
@@ -238,7 +238,7 @@ def run_digest() -> str:
 
     meshes, _ = load_mesh_set("builtin")
     states = []
-    with LineWorld(LineGeometry(lanes=3, spawn_x=-0.15), calibrated_config()) as world:
+    with LineWorld(LineGeometry(lanes=3, spawn_x=-0.15), config or calibrated_config()) as world:
         for wave in range(2):
             for lane, k in enumerate((0.0, 100.0, 400.0)):
                 world.spawn(meshes[lane + 3 * wave], k, lane, MASS, SPEED)
@@ -266,6 +266,21 @@ def test_identical_inputs_give_bit_identical_runs_in_and_across_processes():
     others = {subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
                              env=env).stdout.split()[-1] for _ in range(2)}
     assert {run_digest(), run_digest()} | others == {run_digest()}
+
+
+def test_the_friction_cone_is_left_out_because_the_frictionless_belt_makes_it_change_nothing(monkeypatch):
+    """LineWorld turns pybullet's implicit friction cone off to save solver work; with the belt and roller
+    frictionless that must leave every pose bit-identical (it would not if they had friction)."""
+    settings = []
+    setter = p.setPhysicsEngineParameter
+    monkeypatch.setattr(p, "setPhysicsEngineParameter", lambda **kw: settings.append(kw) or setter(**kw))
+    without_cone = run_digest()
+    assert settings and all(kw["enableConeFriction"] == 0 for kw in settings)
+    rough = calibrated_config(belt_friction=0.5)
+    rough_without_cone = run_digest(rough)
+    monkeypatch.setattr(p, "setPhysicsEngineParameter", lambda **kw: setter(**{**kw, "enableConeFriction": 1}))
+    assert run_digest() == without_cone
+    assert run_digest(rough) != rough_without_cone  # the setting does act where there is friction
 
 
 def chain_poses_after(history: int) -> np.ndarray:
