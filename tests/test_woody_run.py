@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import signal
 import subprocess
 import time
@@ -43,6 +44,8 @@ def test_woody_run_leaves_bag_table_and_report(tmp_path):
     assert counts["/line2/grading/verdicts"] == 3 and counts["/line2/line/ground_truth"] == 3
     assert counts["/line2/top_camera/depth/image_raw"] > 30 and counts["/line2/clock"] > 100
     assert "fillet_id" in result.stdout and str(out / "line.mcap") in result.stdout
+    # the line's own pace, from its first /clock, apart from the nodes' start-up
+    assert re.search(r"\nthe line itself, after \d+\.\d s of node start-up: rtf \d+\.\d\dx\n", result.stdout)
     report = subprocess.run([entry_point("woody"), "report", str(out / "line.mcap"), "--out", str(tmp_path / "again")],
                             capture_output=True, text=True, timeout=120)
     assert report.returncode == 0, report.stderr  # the namespaced bag's verdicts and ground truth are found

@@ -151,6 +151,9 @@ class LineMonitor:
         self.verdicts: list[Verdict] = []
         self.gate_commands = 0
         self.sim_time = 0.0
+        self.first_clock: tuple[float, float] | None = None
+        """(wall monotonic, sim s) of the first /clock: when the line itself started, after the nodes' start-up."""
+        self.last_clock: tuple[float, float] | None = None
         self.node.create_subscription(FilletSpawn, topics.GROUND_TRUTH, self._on_spawn, latched)
         self.node.create_subscription(FilletVerdict, topics.VERDICTS, self._on_verdict, reliable)
         self.node.create_subscription(GateCommand, topics.GATE_COMMANDS, self._on_gate, reliable)
@@ -167,6 +170,16 @@ class LineMonitor:
 
     def _on_clock(self, msg) -> None:
         self.sim_time = stamp_to_seconds(msg.clock)
+        self.last_clock = (time.monotonic(), self.sim_time)
+        self.first_clock = self.first_clock or self.last_clock
+
+    def line_rtf(self, nodes_started: float) -> tuple[float, float] | None:
+        """(sim s per wall s since the line's first /clock, wall s from ``nodes_started`` to it); None before two
+        clocks."""
+        if self.first_clock is None or self.last_clock[0] <= self.first_clock[0]:
+            return None
+        wall = self.last_clock[0] - self.first_clock[0]
+        return (self.last_clock[1] - self.first_clock[1]) / wall, self.first_clock[0] - nodes_started
 
     def spin(self, seconds: float) -> None:
         deadline = time.monotonic() + seconds
@@ -370,6 +383,9 @@ def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, monitor:
     _write_outputs(args, fillets, out, monitor, mesh_notes)
     if cpu is not None:
         print(f"sim {monitor.sim_time:.1f} s in {wall:.1f} s wall: rtf {monitor.sim_time / max(wall, 1e-9):.2f}x")
+        line = monitor.line_rtf(wall_start)
+        if line is not None:
+            print(f"the line itself, after {line[1]:.1f} s of node start-up: rtf {line[0]:.2f}x")
         print(cpu.summary(wall))
     if error:
         print(f"woody run: {error}", file=sys.stderr)
