@@ -314,3 +314,27 @@ def test_a_chain_moves_the_same_in_a_world_that_has_run_other_chains():
     fresh, aged = chain_poses_after(0), chain_poses_after(6)
     assert len(aged) == len(fresh) == 300
     assert np.abs(fresh - aged).max() < 1e-5
+
+
+def test_chain_fate_tells_blow_ups_finished_chains_and_live_ones_apart():
+    from woody_sim.line_world import BLOWN_UP, BLOWUP_SPEED, FINISHED, KEEP, PAST_ROLLER_X, chain_fate
+
+    masses = np.array([1.0, 3.0])
+    state = np.zeros((2, 13))
+    state[:, 6] = 1.0
+    assert chain_fate(state, masses, -0.2) == KEEP
+    for row, col, value in ((1, 3, np.nan), (0, 12, np.inf), (1, 9, -1.01 * BLOWUP_SPEED)):
+        bad = state.copy()
+        bad[row, col] = value
+        assert chain_fate(bad, masses, -0.2) == BLOWN_UP, (row, col, value)
+    fallen = state.copy()
+    fallen[:, 2] = -0.3
+    assert chain_fate(fallen, masses, -0.2) == FINISHED  # every segment below remove_z
+    half_fallen = state.copy()
+    half_fallen[0, 2] = -0.3
+    assert chain_fate(half_fallen, masses, -0.2) == KEEP
+    past = state.copy()
+    past[:, 0] = [PAST_ROLLER_X - 0.3, PAST_ROLLER_X + 0.2]  # centre of mass 0.075 m past the limit
+    assert chain_fate(past, masses, -0.2) == FINISHED
+    past[1, 0] = PAST_ROLLER_X + 0.05  # centre of mass short of it
+    assert chain_fate(past, masses, -0.2) == KEEP
