@@ -161,7 +161,7 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                     n_top += 1
                     top_done = len(top.results) >= spec.lanes
             if side is not None and side.due(now):
-                side.on_step(world, renderer, poses or lanes.poses(), now)
+                side.on_step(world, renderer, poses, now)  # the side camera draws the watched lane: the chain
             if top_done and (side is None or side.result is not None):
                 break
         if side is not None:
