@@ -162,6 +162,35 @@ def test_bad_spawn_parameters_raise_value_error(fillet: FilletMesh, kwargs: dict
             world.spawn(fillet, 10.0, 1, 20.0, SPEED, fillet_id=fid)
 
 
+def test_a_fillet_spawned_late_with_its_spawn_time_moves_as_if_spawned_then(fillet: FilletMesh) -> None:
+    """A worker world hears of its spawns a few steps late (split_world): placed where the belt has carried it,
+    the fillet is bit for bit the one spawned on time, over the roller too."""
+    runs = []
+    for late in (0, 7):
+        with LineWorld(NEAR_EDGE) as world:
+            for _ in range(3 + late):
+                world.step()
+            fid = world.spawn(fillet, 20.0, 1, MASS, SPEED, spawn_time=3 * world.config.dt)
+            assert world.fillets[fid].spawn_time == 3 * world.config.dt
+            while world.steps < 200:
+                world.step()
+            runs.append(world.segment_poses()[fid])
+    assert runs[0][-1, 0] > 0.05 and runs[0][-1, 2] < 0.0  # the tip hangs over the edge
+    assert np.array_equal(runs[0], runs[1])
+
+
+@pytest.mark.parametrize("spawn_time", [-0.01, 1.0, math.nan])
+def test_a_spawn_time_outside_the_past_is_refused(fillet: FilletMesh, spawn_time: float) -> None:
+    with LineWorld() as world:
+        world.step()
+        with pytest.raises(ValueError, match="spawn_time"):
+            world.spawn(fillet, 10.0, 0, MASS, SPEED, spawn_time=spawn_time)
+    with LineWorld(config=PhysicsConfig(activation_margin=None)) as world:
+        world.step()
+        with pytest.raises(ValueError, match="spawn_time"):
+            world.spawn(fillet, 10.0, 0, MASS, SPEED, spawn_time=0.0)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "reason"),
     [({"n_segments": 1}, "N"), ({"dt": 0.5}, "dt"), ({"damping": -0.1}, "damping"),

@@ -32,6 +32,7 @@ from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
+from woody_sim.frame_schedule import FrameSchedule
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
@@ -40,6 +41,7 @@ from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.sensor_model import sensor_preset, to_message_array
 from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
+from woody_sim.split_world import SplitLineWorld
 
 WORLD_FRAME = "world"
 TOP_FRAME = "top_camera_optical_frame"
@@ -88,6 +90,8 @@ class LineSim(Node):
         mu_dynamic = declare(self, "friction_dynamic", calibration.friction_dynamic, "Coulomb cap of the belt drive "
                              "once a segment slips.", 0.0, 10.0)
         segments = declare(self, "segments", 40, "Rigid segments N per fillet.", 2, 200)
+        workers = declare(self, "physics_workers", 1, "Worker processes that simulate every other fillet on "
+                          "another core (0 = all physics in this process).", 0, 1)
         top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
         side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0, 400.0)
         side_idle = declare(self, "side_idle_rate_hz", 2.0, "Side frame rate while no fillet of the watched lane "
@@ -112,7 +116,7 @@ class LineSim(Node):
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
         return SimpleNamespace(
             lanes=lanes, speed_fpm=speed_fpm, mesh_spec=mesh_spec, seed=seed, spacing=spacing, rate=rate,
-            damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, segments=segments,
+            damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, segments=segments, workers=workers,
             top_rate=top_rate, side_rate=side_rate, side_idle=side_idle, side_lane=side_lane,
             top_camera=top_camera, max_lead=max_lead)
 
@@ -120,8 +124,9 @@ class LineSim(Node):
         """The simulated line: geometry, physics world, mesh set, spawn schedule, frame timing, renderer."""
         self.speed = fpm_to_mps(p.speed_fpm)
         self.geometry = LineGeometry(lanes=p.lanes, side_lane=p.side_lane, **top_camera_preset(p.top_camera))
-        self.world = LineWorld(self.geometry, PhysicsConfig(
-            n_segments=p.segments, damping=p.damping, friction_static=p.mu_static, friction_dynamic=p.mu_dynamic))
+        config = PhysicsConfig(n_segments=p.segments, damping=p.damping, friction_static=p.mu_static,
+                               friction_dynamic=p.mu_dynamic)
+        self.world = SplitLineWorld(self.geometry, config) if p.workers else LineWorld(self.geometry, config)
         meshes, errors = load_mesh_set(p.mesh_spec)
         for error in errors:
             self.get_logger().error(error)
@@ -239,33 +244,26 @@ class LineSim(Node):
         executor.add_node(self)
         self.get_logger().info(self.summary)
         self._wait_for_subscribers(executor)
-        next_top, next_side, next_clock = 0.0, 0.0, 0.0
+        frames, next_clock = FrameSchedule(self.top_period, self.side_period), 0.0
         in_flight: deque[float] = deque()  # sim stamps of the frames the renderer is working on, oldest first
         wall_start, sim_start = time.monotonic(), self.world.time
         while not stop.is_set():
             self._spawn_due()
             now = self.world.step()
-            for fillet_id in self.world.take_removed():
-                self.renderer.remove_fillet(fillet_id)
-                if fillet_id in self.world.blown_up:
-                    self.get_logger().warning(f"fillet {fillet_id} removed: its chain blew up numerically "
-                                              "(a physics defect: please report it); it will be unscored")
-            want_top = now + 1e-9 >= next_top
-            want_side, poses = False, None
-            if self.side_period is not None and now + 1e-9 >= next_side:
+            self._forget_removed()
+            want_top, want_side = frames.due(now)
+            if want_top or want_side:
                 poses = self.world.segment_poses()
-                want_side = self.side_gate.take(self.renderer.side_view_occupied(poses), now)
-                next_side += self.side_period
+                self.world.plan(frames.next_time)  # a worker world steps on while this frame goes out
+                want_side = want_side and self.side_gate.take(self.renderer.side_view_occupied(poses), now)
             if want_top or want_side:
                 if want_top:
                     self._hold_for_consumer(executor, now)
                 while in_flight and (self.renderer.ready() or not self.renderer.can_submit):
                     self._publish_frames(self.renderer.collect(copy=False), in_flight.popleft())
                 self._publish_clock()
-                self.renderer.submit(poses if poses is not None else self.world.segment_poses(), want_top=want_top,
-                                     want_side=want_side)
+                self.renderer.submit(poses, want_top=want_top, want_side=want_side)
                 in_flight.append(now)
-                next_top += self.top_period if want_top else 0.0
                 next_clock = now + CLOCK_PERIOD
                 if want_top:  # serve /spawn_fillet at the top camera's rate: a spin costs ~0.5 ms
                     executor.spin_once(timeout_sec=0.0)
@@ -286,6 +284,14 @@ class LineSim(Node):
                                f"{self.spawned} fillets spawned")
         executor.remove_node(self)
         return 0
+
+    def _forget_removed(self) -> None:
+        """Stop rendering the fillets the world removed; a chain that blew up is worth a warning."""
+        for fillet_id in self.world.take_removed():
+            self.renderer.remove_fillet(fillet_id)
+            if fillet_id in self.world.blown_up:
+                self.get_logger().warning(f"fillet {fillet_id} removed: its chain blew up numerically "
+                                          "(a physics defect: please report it); it will be unscored")
 
     def _hold_for_consumer(self, executor, now: float) -> None:
         """With max_lead_s: wait (serving callbacks) until /vision/tracks has caught up to within the lead."""

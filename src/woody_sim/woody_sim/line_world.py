@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Container
 from dataclasses import dataclass, field
 
 import numba
@@ -260,37 +261,25 @@ class LineWorld:
         return self._models[mesh]
 
     def spawn(
-        self, mesh: FilletMesh, k: float, lane: int, mass: float, speed_mps: float, fillet_id: int | None = None
+        self, mesh: FilletMesh, k: float, lane: int, mass: float, speed_mps: float, fillet_id: int | None = None,
+        spawn_time: float | None = None,
     ) -> int:
         """Place a fillet flat on the belt at ``geometry.spawn_x`` in ``lane``, already moving at line speed.
 
         ``k`` is the hinge stiffness (N m / rad), ``mass`` the total chain mass M
         (kg), ``speed_mps`` the line speed. Returns the fillet's id:
         ``fillet_id`` if given (it must not be live), else one never used before.
+        ``spawn_time`` (at most now) places a fillet that entered earlier where the
+        belt has carried it since: exact, because a fillet moves analytically until
+        it nears the roller (a worker world hears of its spawns a few steps late).
         """
-        k = float(k)
-        if not math.isfinite(k) or k < 0.0:
-            raise ValueError(f"stiffness k must be a finite number >= 0, got {k}")
-        mass = _check_positive_finite("mass", mass)
-        if mass > MAX_MASS:
-            raise ValueError(f"mass must be at most {MAX_MASS} kg, got {mass}")
-        speed = _check_positive_finite("speed", speed_mps)
-        if speed > MAX_SPEED_MPS:
-            raise ValueError(f"speed must be at most {MAX_SPEED_MPS} m/s (is it in FPM?), got {speed}")
-        if isinstance(lane, bool) or not isinstance(lane, (int, np.integer)):
-            raise ValueError(f"lane must be an integer, got {lane!r}")
-        lane_y = self.geometry.lane_y(int(lane))
-        if fillet_id is None:
-            fillet_id = self._next_id
-        elif isinstance(fillet_id, bool) or not isinstance(fillet_id, (int, np.integer)) or fillet_id < 0:
-            raise ValueError(f"fillet_id must be a non-negative integer, got {fillet_id!r}")
-        if fillet_id in self._fillets:
-            raise ValueError(f"fillet_id {fillet_id} is already on the line")
-        fillet_id = int(fillet_id)
+        k, lane, mass, speed = check_spawn(self.geometry, k, lane, mass, speed_mps)
+        fillet_id = check_fillet_id(self._next_id if fillet_id is None else fillet_id, self._fillets)
+        spawn_time = self._check_spawn_time(spawn_time)
         self._next_id = max(self._next_id, fillet_id + 1)
         model = self.model_for(mesh).with_mass(mass)
-        info = FilletInfo(fillet_id, int(lane), mesh.name, k, mass, speed, self.time)
-        origin = np.array([self.geometry.spawn_x, lane_y, 0.0])
+        info = FilletInfo(fillet_id, lane, mesh.name, k, mass, speed, spawn_time)
+        origin = np.array([self.geometry.spawn_x, self.geometry.lane_y(lane), 0.0])
         fillet = _Fillet(info=info, mesh=mesh, model=model, origin=origin, drive=np.zeros((model.n_segments, 3)),
                          normal_force=np.zeros(model.n_segments))
         self._fillets[fillet_id] = fillet
@@ -298,6 +287,15 @@ class LineWorld:
         if self.config.activation_margin is None:
             self._activate(fillet)
         return fillet_id
+
+    def _check_spawn_time(self, spawn_time: float | None) -> float:
+        if spawn_time is None:
+            return self.time
+        if self.config.activation_margin is None:
+            raise ValueError("a past spawn_time needs fillets that start on the belt (activation_margin set)")
+        if not 0.0 <= spawn_time <= self.time:
+            raise ValueError(f"spawn_time must be within 0..{self.time} s (now), got {spawn_time}")
+        return float(spawn_time)
 
     def _kinematic_state(self, fillet: _Fillet) -> None:
         """Flat pose translated at line speed since spawn (the exact flat-belt motion); only x changes per step."""
@@ -388,6 +386,15 @@ class LineWorld:
         if fillet.body >= 0:
             p.removeBody(fillet.body, physicsClientId=self._client)
         self._removed.append(fillet_id)
+
+    @property
+    def steps(self) -> int:
+        """Physics steps taken so far (``time`` is ``steps * config.dt``)."""
+        return self._steps
+
+    def plan(self, until: float) -> None:
+        """Nothing to do: a single world steps all its fillets itself (the interface of
+        :meth:`~woody_sim.split_world.SplitLineWorld.plan`, which starts its worker on the steps to ``until``)."""
 
     def take_removed(self) -> list[int]:
         """Ids removed since the last call (fallen, left the line, or :meth:`remove`d)."""
@@ -522,6 +529,33 @@ class LineWorld:
     def hinge_angles(self, fillet_id: int) -> np.ndarray:
         """(N - 1,) hinge angles (rad); positive when the downstream segment pitches down."""
         return hinge_state(self._fillets[fillet_id].state)[0]
+
+
+def check_spawn(geometry: LineGeometry, k: float, lane: int, mass: float, speed_mps: float
+                ) -> tuple[float, int, float, float]:
+    """(k, lane, mass, speed) of a spawn request as numbers, or a ValueError that says what is wrong."""
+    k = float(k)
+    if not math.isfinite(k) or k < 0.0:
+        raise ValueError(f"stiffness k must be a finite number >= 0, got {k}")
+    mass = _check_positive_finite("mass", mass)
+    if mass > MAX_MASS:
+        raise ValueError(f"mass must be at most {MAX_MASS} kg, got {mass}")
+    speed = _check_positive_finite("speed", speed_mps)
+    if speed > MAX_SPEED_MPS:
+        raise ValueError(f"speed must be at most {MAX_SPEED_MPS} m/s (is it in FPM?), got {speed}")
+    if isinstance(lane, bool) or not isinstance(lane, (int, np.integer)):
+        raise ValueError(f"lane must be an integer, got {lane!r}")
+    geometry.lane_y(int(lane))  # raises for a lane the line does not have
+    return k, int(lane), mass, speed
+
+
+def check_fillet_id(fillet_id: int, live: Container[int]) -> int:
+    """``fillet_id`` as an int, or a ValueError if it is not a non-negative integer or is in ``live``."""
+    if isinstance(fillet_id, bool) or not isinstance(fillet_id, (int, np.integer)) or fillet_id < 0:
+        raise ValueError(f"fillet_id must be a non-negative integer, got {fillet_id!r}")
+    if fillet_id in live:
+        raise ValueError(f"fillet_id {fillet_id} is already on the line")
+    return int(fillet_id)
 
 
 KEEP, BLOWN_UP, FINISHED = 0, 1, 2

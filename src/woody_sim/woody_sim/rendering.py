@@ -39,16 +39,11 @@ physics stepping of frame *k + 1* on the second core.
 from __future__ import annotations
 
 import collections
-import ctypes
 import math
 import multiprocessing as mp
 import multiprocessing.connection as mpc
-import os
-import signal
-import threading
 import time
 import traceback
-import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,6 +51,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from woody_sim.child_process import ChildProcess, parent_messages
 from woody_sim.line_geometry import LineGeometry, PinholeCamera
 from woody_sim.raster import ZBuffer
 
@@ -501,38 +497,13 @@ def _validate_poses(known: Mapping[int, Any], poses: Mapping[int, np.ndarray]) -
 
 
 # --------------------------------------------------------------------------- process wrapper
-def _name_process(name: bytes) -> None:
-    """Name this process as top and /proc show it (Linux PR_SET_NAME), so its CPU is attributed by name."""
-    try:
-        ctypes.CDLL(None).prctl(15, name, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
-
-
 def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool, bool], buffers: list[dict]) -> None:
-    # Ctrl-C in a terminal reaches the whole process group; the parent decides when rendering stops.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _name_process(b"woody-render")
-    parent = mp.parent_process()
-    sentinel = parent.sentinel if parent is not None else None
-    try:
-        os.nice(0)
-    except OSError:
-        pass
     renderer = LineRenderer(geometry, render_top=flags[0], render_side=flags[1])
     arrays = [{name: np.frombuffer(buf, dtype=dtype).reshape(shape) for name, (buf, dtype, shape) in slot.items()}
               for slot in buffers]
     pending_error: str | None = None
     shapes: dict[int, list] = {}  # visuals sent once per chain shape, then referred to by key
-    waitables = [conn] + ([sentinel] if sentinel is not None else [])
-    while True:
-        ready = mpc.wait(waitables)
-        if conn not in ready:  # parent died
-            return
-        try:
-            msg = conn.recv()
-        except (EOFError, OSError):
-            return
+    for msg in parent_messages(conn, b"woody-render"):
         op = msg[0]
         try:
             if op == "shape":
@@ -559,8 +530,6 @@ def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool,
                     arrays[slot]["side_rgb"][...] = renderer.render_side(poses)
                 t2 = time.perf_counter()
                 conn.send(("ok", (t1 - t0, t2 - t1)))
-            elif op == "close":
-                return
         except Exception:  # noqa: BLE001 - reported to the parent
             err = traceback.format_exc()
             if op == "render":
@@ -599,7 +568,6 @@ class RenderProcess:
         self._side_camera = geometry.side_camera()
         self._inflight: collections.deque[tuple[int, bool, bool]] = collections.deque()
         self._submitted = 0
-        self._timeout = float(timeout)
         self.last_render_s: tuple[float, float] = (0.0, 0.0)
         ctx = mp.get_context(start_method)
         shapes: dict[str, tuple[str, tuple[int, ...]]] = {}
@@ -615,54 +583,12 @@ class RenderProcess:
                 buf = ctx.RawArray("B", int(np.prod(shape)) * np.dtype(dtype).itemsize)
                 self._buffers[slot][name] = (buf, dtype, shape)
                 self._arrays[slot][name] = np.frombuffer(buf, dtype=dtype).reshape(shape)
-        self._conn, child_conn = ctx.Pipe(duplex=True)
-        self._proc = ctx.Process(
-            target=_child_main,
-            args=(child_conn, geometry, self._flags, self._buffers),
-            name="woody-render",
-            daemon=True,
-        )
-        self._start_ignoring_sigint()
-        child_conn.close()
-        self._closed = False
-        self._finalizer = weakref.finalize(self, RenderProcess._shutdown, self._conn, self._proc)
-
-    def _start_ignoring_sigint(self) -> None:
-        """Start the child with SIGINT ignored from its first instruction: a Ctrl-C that reaches the process
-        group while the child is still importing would otherwise end it in a KeyboardInterrupt traceback
-        (an ignored disposition survives exec, and Python keeps it). The parent's handler is restored."""
-        if threading.current_thread() is not threading.main_thread():
-            self._proc.start()
-            return
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            self._proc.start()
-        finally:
-            signal.signal(signal.SIGINT, previous)
+        self._child = ChildProcess(_child_main, (geometry, self._flags, self._buffers), "render",
+                                   start_method=start_method, timeout=timeout)
 
     # ---- lifecycle
-    @staticmethod
-    def _shutdown(conn: mpc.Connection, proc: Any) -> None:
-        try:
-            conn.send(("close",))
-        except (OSError, ValueError, BrokenPipeError):
-            pass
-        proc.join(timeout=2.0)
-        if proc.is_alive():
-            proc.terminate()
-            proc.join(timeout=2.0)
-        if proc.is_alive():
-            proc.kill()
-            proc.join(timeout=1.0)
-        try:
-            conn.close()
-        except OSError:
-            pass
-
     def close(self) -> None:
-        if not self._closed:
-            self._closed = True
-            self._finalizer()
+        self._child.close()
 
     def __enter__(self) -> RenderProcess:
         return self
@@ -672,17 +598,13 @@ class RenderProcess:
 
     @property
     def pid(self) -> int | None:
-        return self._proc.pid
+        return self._child.pid
 
     def is_alive(self) -> bool:
-        return self._proc.is_alive()
+        return self._child.is_alive()
 
     def _send(self, msg: tuple) -> None:
-        if self._closed:
-            raise RuntimeError("RenderProcess is closed")
-        if not self._proc.is_alive():
-            raise RuntimeError(f"render process died (exit code {self._proc.exitcode})")
-        self._conn.send(msg)
+        self._child.send(msg)
 
     # ---- fillets
     @property
@@ -763,7 +685,7 @@ class RenderProcess:
 
     def ready(self) -> bool:
         """True when the oldest frame in flight can be collected without waiting."""
-        return bool(self._inflight) and self._conn.poll()
+        return bool(self._inflight) and self._child.poll()
 
     def collect(self, copy: bool = True) -> Frames:
         """Wait for the oldest frame in flight. With copy=False the arrays alias shared
@@ -771,15 +693,11 @@ class RenderProcess:
         if not self._inflight:
             raise RuntimeError("collect() without a submitted frame")
         slot, want_top, want_side = self._inflight.popleft()
-        deadline = time.monotonic() + self._timeout
-        while not self._conn.poll(0.05):
-            if not self._proc.is_alive():
-                self._inflight.clear()
-                raise RuntimeError(f"render process died (exit code {self._proc.exitcode})")
-            if time.monotonic() > deadline:
-                self._inflight.clear()
-                raise TimeoutError("render process did not answer")
-        status, payload = self._conn.recv()
+        try:
+            status, payload = self._child.recv()
+        except (RuntimeError, TimeoutError):
+            self._inflight.clear()
+            raise
         if status != "ok":
             raise RuntimeError(f"render process failed:\n{payload}")
         self.last_render_s = payload

@@ -1,0 +1,98 @@
+"""SplitLineWorld: fillets in the worker move bit for bit as alone in a world; removals, errors and misuse."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from woody_sim.line_geometry import LineGeometry
+from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
+from woody_sim.meshes import FilletMesh, load_mesh_set
+from woody_sim.split_world import SplitLineWorld
+
+GEOMETRY = LineGeometry(lanes=3, spawn_x=-0.3)
+SPEED = 0.508
+MASS = 20.0
+
+
+@pytest.fixture(scope="module")
+def meshes() -> list[FilletMesh]:
+    return load_mesh_set("builtin")[0]
+
+
+def alone(mesh: FilletMesh, k: float, lane: int, spawn_step: int, steps: int) -> np.ndarray:
+    """Poses of one fillet, the only one in its world, after ``steps`` steps."""
+    with LineWorld(GEOMETRY, calibrated_config()) as world:
+        while world.steps < spawn_step:
+            world.step()
+        fid = world.spawn(mesh, k, lane, MASS, SPEED)
+        while world.steps < steps:
+            world.step()
+        return world.segment_poses()[fid]
+
+
+def test_each_fillet_moves_as_alone_in_a_world_whichever_process_simulates_it(meshes):
+    """The first spawn stays here, the second goes to the worker, which hears of it late; both tip over the
+    roller exactly as a lone chain would (a shared world would differ in round-off by millimetres)."""
+    steps = 330
+    with SplitLineWorld(GEOMETRY, calibrated_config()) as world:
+        here = world.spawn(meshes[0], 0.0, 0, MASS, SPEED)
+        for _ in range(5):
+            world.step()
+        there = world.spawn(meshes[1], 100.0, 2, MASS, SPEED)
+        world.plan(steps * world.config.dt)
+        while world.steps < steps:
+            world.step()
+        poses = world.segment_poses()
+        assert world.model(there).total_mass == pytest.approx(MASS)
+    assert np.array_equal(poses[here], alone(meshes[0], 0.0, 0, 0, steps))
+    assert np.array_equal(poses[there], alone(meshes[1], 100.0, 2, 5, steps))
+    assert poses[here][-1, 2] < -0.02 and poses[there][-1, 0] > 0.05  # both past the edge
+
+
+def test_fillets_the_worker_removes_are_reported_after_the_next_poses(meshes):
+    with SplitLineWorld(GEOMETRY, calibrated_config()) as world:
+        ids = [world.spawn(meshes[0], 100.0, lane, MASS, SPEED) for lane in (0, 1)]
+        while world.time < 2.5:
+            world.step()
+            if world.steps % 50 == 0:
+                world.segment_poses()
+        removed = world.take_removed()
+        assert world.segment_poses() == {}
+        removed += world.take_removed()
+        assert sorted(removed) == ids and world.blown_up == []
+
+
+def test_bad_spawns_are_refused_here_and_ids_stay_unique(meshes):
+    with SplitLineWorld(GEOMETRY, calibrated_config()) as world:
+        first, second = (world.spawn(meshes[0], 10.0, lane, MASS, SPEED) for lane in (0, 1))
+        with pytest.raises(ValueError, match="already on the line"):
+            world.spawn(meshes[0], 10.0, 2, MASS, SPEED, fillet_id=second)
+        with pytest.raises(ValueError, match="lane"):
+            world.spawn(meshes[0], 10.0, 3, MASS, SPEED)
+        assert world.spawn(meshes[0], 10.0, 2, MASS, SPEED) == 2 and first == 0
+
+
+def test_poses_before_the_planned_step_are_an_error(meshes):
+    with SplitLineWorld(GEOMETRY, calibrated_config()) as world:
+        world.plan(0.1)
+        world.step()
+        with pytest.raises(RuntimeError, match="sent on to"):
+            world.segment_poses()
+
+
+def test_a_dead_worker_is_an_error_not_a_hang(meshes):
+    with SplitLineWorld(GEOMETRY, calibrated_config()) as world:
+        world.spawn(meshes[0], 10.0, 0, MASS, SPEED)
+        os.kill(world._worker.pid, signal.SIGKILL)
+        world.step()
+        with pytest.raises(RuntimeError, match="physics worker process died"):
+            world.segment_poses()
+
+
+def test_a_world_that_simulates_the_whole_belt_cannot_be_split():
+    with pytest.raises(ValueError, match="activation_margin"):
+        SplitLineWorld(GEOMETRY, PhysicsConfig(activation_margin=None))
