@@ -101,6 +101,7 @@ def bench_sim(seconds: float) -> dict:
         figures[f"tinyrenderer_{view}_ms"] = render[f"tiny_{view}_ms_p50"]
         figures[f"render_{view}_speedup_vs_tinyrenderer"] = render[f"{view}_speedup_vs_tiny"]
     figures["rtf"] = line_sim_rtf(seconds)
+    figures["rtf_without_physics_worker"] = line_sim_rtf(seconds, physics_workers=0)
     figures["rtf_side_200hz"] = line_sim_rtf(seconds, side_rate_hz=200.0)
     return figures
 
@@ -124,8 +125,10 @@ def bench_graph(fillets: int = 12) -> dict:
             "woody_run_startup_s": float(line.group(1)), "sweep_evals_per_min": float(rate.group(1))}
 
 
-def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_rate_hz: float = 60.0) -> float:
-    """Sim seconds per wall second of the real line_sim process (3 lanes, top 30 Hz, side ``side_rate_hz``)."""
+def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_rate_hz: float = 60.0,
+                 physics_workers: int = 1) -> float:
+    """Sim seconds per wall second of the real line_sim process (3 lanes, top 30 Hz, side ``side_rate_hz``;
+    ``physics_workers=0`` keeps all its physics in its main process)."""
     import rclpy
     from rosgraph_msgs.msg import Clock
 
@@ -138,7 +141,8 @@ def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_
         node.create_subscription(Clock, "/clock", lambda m: samples.append(
             (time.monotonic(), stamp_to_seconds(m.clock))), 100)
         sim = NodeProcess("line_sim", {"lanes": lanes, "line_speed_fpm": speed_fpm, "top_rate_hz": 30.0,
-                                       "side_rate_hz": side_rate_hz, "duration_s": warmup + seconds},
+                                       "side_rate_hz": side_rate_hz, "duration_s": warmup + seconds,
+                                       "physics_workers": physics_workers},
                           domain_id=lease.domain_id, log_dir=Path(logs))
         executor = rclpy.executors.SingleThreadedExecutor(context=context)
         executor.add_node(node)
