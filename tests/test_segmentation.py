@@ -188,6 +188,21 @@ def test_holes_and_noise_of_a_real_camera_are_filled_and_smoothed_before_the_con
             SegmentationParams(**bad)
 
 
+def test_height_map_is_background_minus_depth_with_every_missing_return_at_zero():
+    """The compiled pass gives numpy's float32 values bit for bit; NaN, inf and depth <= 0 give 0."""
+    rng = np.random.default_rng(3)
+    background = np.full((37, 53), 0.75, np.float32)
+    depth = background - rng.random(background.shape, dtype=np.float32) * 0.03
+    depth[::7, ::5], depth[::11, ::3], depth[::13, ::2], depth[1, 1] = np.nan, 0.0, np.inf, -0.2
+    background[2, ::4] = np.nan
+    expected = np.subtract(background, depth, dtype=np.float32)
+    with np.errstate(invalid="ignore"):
+        expected[~np.isfinite(expected) | ~(depth > 0.0)] = 0.0
+    height = height_map(depth, background)
+    assert height.dtype == np.float32 and np.array_equal(height, expected)
+    assert np.array_equal(height_map(depth.astype(np.float64)[:, ::-1], background[:, ::-1]), expected[:, ::-1])
+
+
 def test_empty_frames_give_no_blobs():
     background = TopScene([]).background_depth()
     assert segment_depth(background.copy(), background) == []
