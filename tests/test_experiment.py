@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from woody_sim.meshes import load_mesh_set
+from woody_sim.meshes import load_mesh_set, yawed
 from woody_tools.experiment import RunSpec, evaluate_run
 
 
@@ -17,6 +17,18 @@ def test_a_run_seen_through_a_noisy_camera_is_scored_and_reproducible():
     ideal = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, lanes=1, side=False), mesh)
     assert noisy[0]["status"] == ideal[0]["status"] == "scored", (noisy, ideal)
     assert math.isfinite(noisy[0]["phi"]) and noisy[0]["phi"] != ideal[0]["phi"]
+
+
+def test_a_fillet_lying_turned_on_the_belt_is_simulated_turned_and_still_scored(monkeypatch):
+    from woody_tools import experiment
+
+    turned = []
+    monkeypatch.setattr(experiment, "yawed", lambda mesh, deg: turned.append(deg) or yawed(mesh, deg))
+    mesh = load_mesh_set("builtin")[0][0]
+    straight = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, lanes=1, side=False), mesh)
+    assert turned == []
+    (row,) = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, lanes=1, side=False, yaw_deg=15.0), mesh)
+    assert turned == [15.0] and row["status"] == "scored" and row["phi"] != straight[0]["phi"]
 
 
 def test_the_colour_outline_keeps_a_stiff_fillet_woody_through_stereo_noise(monkeypatch):

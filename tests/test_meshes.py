@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import trimesh
@@ -85,6 +87,21 @@ def test_generated_top_surface_never_folds_over() -> None:
 def test_generated_rims_are_smooth_not_stair_stepped() -> None:
     for seed in range(3):
         assert describe(generate_fillet(seed)).rim_roughness < 1.06
+
+
+def test_a_yawed_fillet_is_the_same_fillet_turned_on_the_belt(references: list[FilletMesh]) -> None:
+    from woody_sim.meshes import yawed
+
+    fillet = references[0]
+    quarter = yawed(fillet, 90.0)
+    assert quarter.name == fillet.name and quarter.source.endswith("@yaw+90.0")
+    assert quarter.length == pytest.approx(fillet.width, abs=1e-9)
+    assert quarter.width == pytest.approx(fillet.length, abs=1e-9)
+    assert quarter.mesh.area == pytest.approx(fillet.mesh.area)
+    lo, hi = yawed(fillet, -13.0).mesh.bounds
+    assert lo[2] == pytest.approx(0.0, abs=1e-12) and lo[0] == pytest.approx(-hi[0]) and lo[1] == pytest.approx(-hi[1])
+    with pytest.raises(ValueError, match="yaw"):
+        yawed(fillet, math.nan)
 
 
 def test_generator_is_reproducible_per_seed() -> None:

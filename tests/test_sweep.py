@@ -124,6 +124,18 @@ def _check_resume(out, keys):
     # one top camera per folder: another camera is refused before anything runs
     other = _woody(*ARGS, "--out", str(out), "--top-camera", "paper")
     assert other.returncode == 2 and "use another --out" in other.stderr
+    turned = _woody(*ARGS, "--out", str(out), "--yaw-sd", "13")
+    assert turned.returncode == 2 and "--yaw-sd 0.0; use another --out for --yaw-sd 13" in turned.stderr
+
+
+def test_each_mesh_lies_turned_the_same_way_at_every_k_and_speed_with_yaw_sd():
+    from woody_tools.sweep import mesh_yaw, plan
+
+    runs = plan(["a", "b"], [0.0, 100.0], [100.0, 130.0], 3, 20.0, yaw_sd=13.0)
+    yaws = {name: {r.yaw_deg for r in runs if r.mesh == name} for name in ("a", "b")}
+    assert all(len(v) == 1 for v in yaws.values()) and yaws["a"] != yaws["b"]
+    assert yaws["a"] == {mesh_yaw("a", 13.0)} and mesh_yaw("a", 26.0) == 2 * mesh_yaw("a", 13.0)
+    assert {r.yaw_deg for r in plan(["a"], [0.0], [100.0], 3, 20.0)} == {0.0}
 
 
 def test_threshold_and_roc_helpers():

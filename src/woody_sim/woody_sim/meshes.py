@@ -253,6 +253,19 @@ def orient_canonical(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return _centre(out)
 
 
+def yawed(fillet: FilletMesh, degrees: float) -> FilletMesh:
+    """The fillet turned by ``degrees`` about the vertical (positive towards +y), re-centred: how it lies on the
+    belt when it does not arrive straight. The chain is still sliced along the flow (x), as the paper's system
+    slices its meshes along their file's x axis whatever their outline's own axis."""
+    angle = math.radians(float(degrees))
+    if not math.isfinite(angle):
+        raise ValueError(f"yaw must be a finite number of degrees, got {degrees!r}")
+    c, s = math.cos(angle), math.sin(angle)
+    mesh = fillet.mesh.copy()
+    mesh.apply_transform(_homogeneous(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])))
+    return FilletMesh(name=fillet.name, mesh=_centre(mesh), source=f"{fillet.source}@yaw{float(degrees):+.1f}")
+
+
 def _homogeneous(rot: np.ndarray) -> np.ndarray:
     mat = np.eye(4)
     mat[:3, :3] = rot

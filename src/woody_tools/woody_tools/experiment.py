@@ -44,7 +44,7 @@ from woody_common.calibration import load_calibration
 from woody_common.line import fpm_to_mps
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config, seed_dynamic_friction
-from woody_sim.meshes import FilletMesh
+from woody_sim.meshes import FilletMesh, yawed
 from woody_sim.rendering import LineRenderer
 from woody_sim.sensor_model import sensor_preset
 from woody_vision.camera_model import LaneLayout
@@ -96,6 +96,8 @@ class RunSpec:
     """Drive friction cap (mu_dynamic keeps the seed's 0.75 ratio); None = the calibrated one."""
     sensor: str = "ideal"
     """Top camera error model (woody_sim.sensor_model preset), seeded per run."""
+    yaw_deg: float = 0.0
+    """How the fillet lies on the belt: turned this far about the vertical (woody_sim.meshes.yawed)."""
 
     def physics_overrides(self) -> dict:
         """PhysicsConfig fields this run sets itself (the rest come from the calibration)."""
@@ -131,6 +133,7 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     receives frame counts.
     """
     geometry = LineGeometry(lanes=spec.lanes, spawn_x=SPAWN_X, **top_camera_preset(spec.top_camera))
+    mesh = yawed(mesh, spec.yaw_deg) if spec.yaw_deg else mesh
     renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side)
     calibration = load_calibration()
     world = LineWorld(geometry, config or calibrated_config(calibration, **spec.physics_overrides()))

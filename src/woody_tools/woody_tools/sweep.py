@@ -26,7 +26,10 @@ import os
 import shlex
 import sys
 import time
+import zlib
 from pathlib import Path
+
+import numpy as np
 
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
 from woody_sim.sensor_model import PRESETS
@@ -75,6 +78,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m); one camera per --out folder")
+    parser.add_argument("--yaw-sd", type=float, default=0.0, metavar="DEG",
+                        help="fillets lie turned on the belt: each mesh by DEG x a normal draw seeded by its name, "
+                             "the same at every k and speed (default 0: straight); one setting per --out folder")
     parser.add_argument("--traces", action="store_true",
                         help="also write Φ, Hu and solidity terms of every window frame per fillet: traces.csv and "
                              "traces/<mesh>_<speed>fpm.png (runs already done without a trace are redone)")
@@ -186,11 +192,20 @@ def _work(run: RunSpec, mesh) -> list[dict]:
 
 
 def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
-         side: bool = True, top_camera: str = "default", sensor: str = "ideal") -> list[RunSpec]:
+         side: bool = True, top_camera: str = "default", sensor: str = "ideal", yaw_sd: float = 0.0
+         ) -> list[RunSpec]:
     """Runs ordered so that partial results already span the grid (k and speed vary fastest)."""
     return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side, top_camera=top_camera,
-                    sensor=sensor)
+                    sensor=sensor, yaw_deg=mesh_yaw(name, yaw_sd))
             for name in mesh_names for speed in speeds for k in ks]
+
+
+def mesh_yaw(name: str, sd_deg: float) -> float:
+    """How far a mesh lies turned on the belt with ``--yaw-sd``: ``sd_deg`` times a normal draw seeded by its
+    name, so it lies the same way at every k and speed and in every rerun (0 for ``sd_deg`` 0)."""
+    if not sd_deg:
+        return 0.0
+    return float(sd_deg * np.random.default_rng(zlib.crc32(name.encode())).standard_normal())
 
 
 def run(args: argparse.Namespace) -> int:
@@ -212,14 +227,13 @@ def run(args: argparse.Namespace) -> int:
         return 2
     names = list(meshes)
     csv_path = out / CSV_FILE
-    camera = _folder_camera(out / META_FILE)
-    if camera not in (None, args.top_camera):
-        print(f"woody sweep: {out} holds runs with --top-camera {camera}; use another --out for "
-              f"--top-camera {args.top_camera}", file=sys.stderr)
+    mismatch = _folder_mismatch(out / META_FILE, args)
+    if mismatch:
+        print(f"woody sweep: {out} holds runs with {mismatch}", file=sys.stderr)
         return 2
     done, runs_file = completed_runs(csv_path, args.lanes, out if args.traces else None)
     runs = plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, top_camera=args.top_camera,
-                sensor=args.sensor)
+                sensor=args.sensor, yaw_sd=args.yaw_sd)
     todo = [r for r in runs if _key(r.mesh, r.k, r.speed_fpm, mass) not in done]
     where = args.scheduler or f"a local Dask cluster of {min(args.jobs, max(1, len(todo)))} workers"
     print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds = {len(runs)} runs "
@@ -250,12 +264,22 @@ def _report_traces(out: Path) -> None:
           f"{out / traces.TRACE_DIR}", file=sys.stderr)
 
 
-def _folder_camera(meta_path: Path) -> str | None:
-    """The top camera of the runs already in a sweep folder (None if it has none)."""
+FOLDER_SETTINGS = {"top_camera": "default", "yaw_sd": 0.0}
+"""Settings all the runs in one --out folder share (runs.csv does not repeat them per row), with their defaults."""
+
+
+def _folder_mismatch(meta_path: Path, args: argparse.Namespace) -> str | None:
+    """'--setting old; use another --out for --setting new' if this sweep's setting differs from the runs already
+    in the folder, else None."""
     if not meta_path.exists():
         return None
-    cameras = {i.get("top_camera", "default") for i in json.loads(meta_path.read_text()).get("invocations", [])}
-    return cameras.pop() if len(cameras) == 1 else None
+    invocations = json.loads(meta_path.read_text()).get("invocations", [])
+    for name, default in FOLDER_SETTINGS.items():
+        before = {i.get(name, default) for i in invocations}
+        flag, now = "--" + name.replace("_", "-"), getattr(args, name)
+        if len(before) == 1 and now not in before:
+            return f"{flag} {before.pop()}; use another --out for {flag} {now}"
+    return None
 
 
 def _evaluate_todo(args: argparse.Namespace, todo: list[RunSpec], meshes: dict,
@@ -294,7 +318,7 @@ def _update_meta(path: Path, stats: cluster.Throughput, args: argparse.Namespace
             "evaluations": stats.evaluations, "wall_s": round(stats.wall_s, 2), "jobs": stats.workers,
             "cores": os.cpu_count(), "scheduler": args.scheduler or "local", **stats.as_meta(),
             "meshes": args.meshes, "n_meshes": n_meshes, "mass": mass, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
-            "top_camera": args.top_camera,
+            "top_camera": args.top_camera, "yaw_sd": args.yaw_sd,
         })
     meta["evaluations"] = sum(i["evaluations"] for i in meta["invocations"])
     meta["wall_s"] = sum(i["wall_s"] for i in meta["invocations"])
@@ -316,4 +340,6 @@ def _argv(args: argparse.Namespace) -> list[str]:
         out.append("--traces")
     if args.sensor != "ideal":
         out += ["--sensor", args.sensor]
+    if args.yaw_sd:
+        out += ["--yaw-sd", f"{args.yaw_sd:g}"]
     return out
