@@ -49,6 +49,16 @@ def test_flood_matches_the_dilation_definition(seed):
     assert (got[component > 0] > 0).mean() > 0.95  # the regions fill the component
 
 
+@pytest.mark.parametrize("seed", range(8, 40))
+def test_flood_matches_the_dilation_definition_on_more_shapes(seed):
+    """Also where the ellipses do not all touch, so some pixels stay unreached: the flood admits each level's
+    pixels once, and a pixel left pending carries over to the next level as the definition's rescan has it."""
+    distance, markers, component = touching_blobs(seed)
+    levels = np.linspace(float(distance.max()), 0.0, 7)[1:]
+    assert np.array_equal(flood(distance, markers, component, levels),
+                          reference_flood(distance, markers, component, levels))
+
+
 def test_a_pixel_reached_by_two_regions_at_once_takes_the_higher_label():
     component = np.full((3, 5), 255, np.uint8)
     markers = np.zeros((3, 5), np.int32)

@@ -21,6 +21,7 @@ from woody_vision.segmentation import (
     SegmentationParams,
     height_map,
     segment_depth,
+    segment_mask,
 )
 from woody_vision.synthetic import (
     DEFAULT_TOP_K,
@@ -201,6 +202,38 @@ def test_height_map_is_background_minus_depth_with_every_missing_return_at_zero(
     height = height_map(depth, background)
     assert height.dtype == np.float32 and np.array_equal(height, expected)
     assert np.array_equal(height_map(depth.astype(np.float64)[:, ::-1], background[:, ::-1]), expected[:, ::-1])
+
+
+def ellipses_mask(shape: tuple[int, int], offset: tuple[int, int]) -> np.ndarray:
+    """Two touching fillet-sized ellipses, a lone one and a speck, shifted by ``offset`` (x, y)."""
+    mask = np.zeros(shape, np.uint8)
+    ox, oy = offset
+    for centre, axes in (((60, 40), (45, 22)), ((140, 46), (45, 22)), ((110, 130), (40, 20)), ((30, 120), (3, 3))):
+        cv2.ellipse(mask, (centre[0] + ox, centre[1] + oy), axes, 10.0, 0, 360, 255, -1)
+    return mask
+
+
+def test_blobs_are_found_in_the_box_of_fillet_pixels_as_in_the_whole_frame():
+    """segment_mask opens and labels only the bounding box of the fillet pixels; the blobs must be those of the
+    whole frame, so moving the fillets across a larger frame moves every blob and changes nothing else."""
+    params = SegmentationParams()
+    height = np.full((376, 672), 0.02, np.float32)
+    near = segment_mask(ellipses_mask((376, 672), (4, 3)), height, params)
+    far = segment_mask(ellipses_mask((376, 672), (300, 200)), height, params)
+    assert len(near) == len(far) == 3  # the touching pair split, the speck dropped
+    for a, b in zip(near, far):
+        assert np.array_equal(a.contour + [296, 197], b.contour) and a.area_px == b.area_px
+        assert a.bbox[2:] == b.bbox[2:] and (a.bbox[0] + 296, a.bbox[1] + 197) == b.bbox[:2]
+        assert np.allclose(np.add(a.centroid, (296, 197)), b.centroid)
+
+
+def test_a_fillet_cut_by_the_frame_edge_keeps_its_edge_pixels():
+    """The image border still counts as fillet for the opening (OpenCV's default), as on the whole frame."""
+    mask = np.zeros((376, 672), np.uint8)
+    cv2.ellipse(mask, (200, 5), (45, 22), 0.0, 0, 360, 255, -1)
+    (blob,) = segment_mask(mask, np.full(mask.shape, 0.02, np.float32), SegmentationParams())
+    opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+    assert blob.bbox[1] == 0 and blob.area_px == cv2.countNonZero(opened)  # the whole frame, opened
 
 
 def test_empty_frames_give_no_blobs():

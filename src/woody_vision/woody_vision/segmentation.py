@@ -241,13 +241,24 @@ def segment_mask(mask: np.ndarray | None, height: np.ndarray, params: Segmentati
     """Split a fillet mask (uint8, 255 = fillet; None for a 0-pixel frame) into blobs with heights from ``height``."""
     if mask is None:  # a 0-pixel frame has no fillets (OpenCV would assert on it)
         return []
+    # Fillets cover about a quarter of the frame's bounding box of fillet pixels, so the opening and the labelling
+    # run on that box (with a margin the opening needs), which gives the same components.
+    margin = params.open_kernel_px // 2 + 1
+    bx, by, bw, bh = cv2.boundingRect(mask)
+    if bw == 0:
+        return []
+    rows, cols = mask.shape
+    cx0, cy0 = max(bx - margin, 0), max(by - margin, 0)
+    cx1, cy1 = min(bx + bw + margin, cols), min(by + bh + margin, rows)
+    crop = mask[cy0:cy1, cx0:cx1]
     if params.open_kernel_px > 1:
         kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (params.open_kernel_px, params.open_kernel_px))
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+        crop = cv2.morphologyEx(crop, cv2.MORPH_OPEN, kernel)
     # Grana's block-based labelling: same components, ~3x faster with stats than the default on one thread.
-    count, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, cv2.CV_32S, cv2.CCL_GRANA)
+    count, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(crop, 8, cv2.CV_32S, cv2.CCL_GRANA)
+    height = np.asarray(height, np.float32)[cy0:cy1, cx0:cx1]
     blobs: list[Blob] = []
-    rows, cols = mask.shape
+    rows, cols = crop.shape
     for label in range(1, count):
         x, y, w, h, area = (int(s) for s in stats[label])
         if area < params.min_area_px:
@@ -255,17 +266,20 @@ def segment_mask(mask: np.ndarray | None, height: np.ndarray, params: Segmentati
         # ROI with a 1-pixel empty frame so contours and watershed never touch the ROI border.
         x0, y0 = max(x - 1, 0), max(y - 1, 0)
         x1, y1 = min(x + w + 1, cols), min(y + h + 1, rows)
-        component = np.zeros((y1 - y0 + 2, x1 - x0 + 2), np.uint8)
-        component[1:-1, 1:-1][labels[y0:y1, x0:x1] == label] = 255
-        origin = (x0 - 1, y0 - 1)
-        height_roi = np.zeros(component.shape, np.float32)
-        height_roi[1:-1, 1:-1] = height[y0:y1, x0:x1]
+        component = _pad(cv2.compare(labels[y0:y1, x0:x1], label, cv2.CMP_EQ))
+        origin = (cx0 + x0 - 1, cy0 + y0 - 1)
+        height_roi = _pad(height[y0:y1, x0:x1])
         for part, contour in _split_component(component, params):
             blob = _make_blob(part, contour, height_roi, origin, params.min_area_px)
             if blob is not None:
                 blobs.append(blob)
     blobs.sort(key=lambda b: (b.centroid[1], b.centroid[0]))
     return blobs
+
+
+def _pad(roi: np.ndarray) -> np.ndarray:
+    """The ROI inside a 1-pixel frame of zeros (one OpenCV call; 3x faster than numpy's zeros and assignment)."""
+    return cv2.copyMakeBorder(roi, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
 
 
 def _split_component(component: np.ndarray, params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
