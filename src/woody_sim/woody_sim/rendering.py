@@ -596,13 +596,6 @@ class RenderProcess:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    @property
-    def pid(self) -> int | None:
-        return self._child.pid
-
-    def is_alive(self) -> bool:
-        return self._child.is_alive()
-
     def _send(self, msg: tuple) -> None:
         self._child.send(msg)
 
