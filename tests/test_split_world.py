@@ -96,3 +96,27 @@ def test_a_dead_worker_is_an_error_not_a_hang(meshes):
 def test_a_world_that_simulates_the_whole_belt_cannot_be_split():
     with pytest.raises(ValueError, match="activation_margin"):
         SplitLineWorld(GEOMETRY, PhysicsConfig(activation_margin=None))
+
+
+def test_the_worker_ends_when_its_parent_is_killed():
+    """A line_sim killed with SIGKILL leaves no physics worker behind."""
+    import subprocess
+    import sys
+    import time
+
+    script = ("import sys, time\n"
+              "from woody_sim.line_geometry import LineGeometry\n"
+              "from woody_sim.line_world import calibrated_config\n"
+              "from woody_sim.split_world import SplitLineWorld\n"
+              "if __name__ == '__main__':\n"
+              "    world = SplitLineWorld(LineGeometry(), calibrated_config())\n"
+              "    print(world._worker.pid, flush=True)\n"
+              "    time.sleep(60)\n")
+    parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    worker = int(parent.stdout.readline())
+    os.kill(parent.pid, signal.SIGKILL)
+    parent.wait(timeout=10)
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and os.path.exists(f"/proc/{worker}"):
+        time.sleep(0.1)
+    assert not os.path.exists(f"/proc/{worker}")

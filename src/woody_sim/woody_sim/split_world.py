@@ -160,7 +160,10 @@ def _serve(conn: mpc.Connection, geometry: LineGeometry, config: PhysicsConfig) 
             except Exception:  # noqa: BLE001 - reported to the parent, which raises it
                 answer = ("err", traceback.format_exc())
             if answer is not None:
-                conn.send(answer)
+                try:
+                    conn.send(answer)
+                except (BrokenPipeError, ConnectionResetError):  # the parent died mid-request: nobody to answer
+                    return
     finally:
         world.close()
 
