@@ -31,8 +31,10 @@ def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_pa
     ros_node.create_subscription(FilletSpawn, "/line/ground_truth", received["/line/ground_truth"].append,
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    # Paced to the wall clock: unpaced, the line runs faster than real time (two physics processes), and this
+    # test's one Python thread, taking 2 MB side frames at 60 Hz, then falls behind the cameras' 10-deep queues.
     sim = NodeProcess("line_sim", {"duration_s": duration, "wait_for_subscribers": 1, "side_rate_hz": 60.0,
-                                   "side_idle_rate_hz": 60.0},
+                                   "side_idle_rate_hz": 60.0, "realtime": True},
                       domain_id=ros_domain, log_dir=tmp_path)
     try:
         spin_until(ros_node, lambda: not sim.alive(), timeout=120.0)
