@@ -104,6 +104,13 @@ def test_a_yawed_fillet_is_the_same_fillet_turned_on_the_belt(references: list[F
         yawed(fillet, math.nan)
 
 
+def test_a_meshs_yaw_is_seeded_by_its_name_and_scales_with_the_spread() -> None:
+    from woody_sim.meshes import mesh_yaw
+
+    assert mesh_yaw("seed0001", 13.0) == mesh_yaw("seed0001", 13.0) != mesh_yaw("seed0002", 13.0)
+    assert mesh_yaw("seed0001", 26.0) == 2.0 * mesh_yaw("seed0001", 13.0) and mesh_yaw("seed0001", 0.0) == 0.0
+
+
 def test_generator_is_reproducible_per_seed() -> None:
     a, b, c = generate_fillet(7), generate_fillet(7), generate_fillet(8)
     assert np.array_equal(a.mesh.vertices, b.mesh.vertices) and np.array_equal(a.mesh.faces, b.mesh.faces)

@@ -129,7 +129,8 @@ def _check_resume(out, keys):
 
 
 def test_each_mesh_lies_turned_the_same_way_at_every_k_and_speed_with_yaw_sd():
-    from woody_tools.sweep import mesh_yaw, plan
+    from woody_sim.meshes import mesh_yaw
+    from woody_tools.sweep import plan
 
     runs = plan(["a", "b"], [0.0, 100.0], [100.0, 130.0], 3, 20.0, yaw_sd=13.0)
     yaws = {name: {r.yaw_deg for r in runs if r.mesh == name} for name in ("a", "b")}

@@ -35,7 +35,7 @@ from woody_msgs.srv import SpawnFillet
 from woody_sim.frame_schedule import FrameSchedule
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
-from woody_sim.meshes import MeshError, load_mesh, load_mesh_set
+from woody_sim.meshes import MeshError, load_mesh, load_mesh_set, mesh_yaw, yawed
 from woody_sim.pacing import LeadLimiter
 from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.sensor_model import sensor_preset, to_message_array
@@ -75,6 +75,9 @@ class LineSim(Node):
                                                    "Stiffness values (N*m/rad) drawn per spawned fillet.")]
         mesh_spec = declare(self, "meshes", "builtin",
                             "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
+        self.yaw_sd = declare(self, "yaw_sd_deg", 0.0, "Fillets lie turned on the belt: each mesh by this many "
+                              "degrees times a normal draw seeded by its name (0 = straight; woody sweep --yaw-sd).",
+                              0.0, 45.0)
         seed = declare(self, "seed", 7, "Seed of the stiffness draw and generated meshes.", 0, 2**31 - 1)
         self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, 100000)
         self.spawn_duration = declare(self, "spawn_duration_s", 0.0, "Stop spawning after this much sim time "
@@ -132,6 +135,7 @@ class LineSim(Node):
             self.get_logger().error(error)
         if not meshes:
             raise ValueError(f"mesh set '{p.mesh_spec}' has no loadable mesh")
+        meshes = [self._laid_on_belt(mesh) for mesh in meshes]
         self.meshes = {m.name: m for m in meshes}
         for mesh in meshes:  # build every chain model now (~0.2 s each), not in the loop at its first spawn
             self.world.model_for(mesh)
@@ -143,6 +147,10 @@ class LineSim(Node):
         self.side_period = 1.0 / p.side_rate if p.side_rate > 0 else None
         self.side_gate = SideFrameGate(idle_period_s=1.0 / p.side_idle)
         self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
+
+    def _laid_on_belt(self, mesh):
+        """The mesh turned as it lies on this line's belt (``yaw_sd_deg``; straight by default)."""
+        return yawed(mesh, mesh_yaw(mesh.name, self.yaw_sd)) if self.yaw_sd else mesh
 
     def _create_interfaces(self, p: SimpleNamespace) -> None:
         """Publishers (clock, ground truth, cameras, camera poses), the spawn service and the pacing subscription."""
@@ -188,7 +196,7 @@ class LineSim(Node):
 
     def on_spawn_request(self, request: SpawnFillet.Request, response: SpawnFillet.Response) -> SpawnFillet.Response:
         try:
-            mesh = self.meshes.get(request.mesh) or load_mesh(request.mesh)
+            mesh = self.meshes.get(request.mesh) or self._laid_on_belt(load_mesh(request.mesh))
             fillet_id = self.spawn(mesh, request.stiffness, int(request.lane), request.mass or self.mass,
                                    request.line_speed or self.speed)
         except (MeshError, ValueError) as exc:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import math
+import zlib
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -264,6 +265,15 @@ def yawed(fillet: FilletMesh, degrees: float) -> FilletMesh:
     mesh = fillet.mesh.copy()
     mesh.apply_transform(_homogeneous(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])))
     return FilletMesh(name=fillet.name, mesh=_centre(mesh), source=f"{fillet.source}@yaw{float(degrees):+.1f}")
+
+
+def mesh_yaw(name: str, sd_deg: float) -> float:
+    """How far the mesh called ``name`` lies turned on the belt for a yaw spread ``sd_deg``: ``sd_deg`` times a
+    normal draw seeded by the name, so a mesh lies the same way at every k and speed, in a sweep and on the
+    line, and in every rerun (0 for ``sd_deg`` 0)."""
+    if not sd_deg:
+        return 0.0
+    return float(sd_deg * np.random.default_rng(zlib.crc32(name.encode())).standard_normal())
 
 
 def _homogeneous(rot: np.ndarray) -> np.ndarray:

@@ -53,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m)")
+    parser.add_argument("--yaw-sd", type=float, default=0.0, metavar="DEG",
+                        help="fillets lie turned on the belt: each mesh by DEG x a normal draw seeded by its name "
+                             "(default 0: straight; line_sim's yaw_sd_deg)")
     parser.add_argument("--calibration", default=str(CALIBRATION_PATH),
                         help="calibration file given to line_sim and the grader as a ROS params file "
                              "(default config/calibration.yaml)")
@@ -216,7 +219,8 @@ def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, obj
             "fillets requested": fillets or f"{args.duration:g} s of spawning",
             "threshold": "grader default" if args.threshold is None else args.threshold,
             "side camera (Hz)": args.side_rate, "paced to wall clock": args.realtime, "top camera model": args.sensor,
-            "top camera geometry": args.top_camera, "namespace": args.namespace or "/"}
+            "top camera geometry": args.top_camera, "fillets turned (yaw sd, deg)": args.yaw_sd,
+            "namespace": args.namespace or "/"}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -277,7 +281,7 @@ def _start_nodes(args: argparse.Namespace, fillets: int | None, out: Path, domai
         "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
         "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
         "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
-        "max_lead_s": MAX_LEAD_S, "top_camera": args.top_camera, "sensor": args.sensor,
+        "max_lead_s": MAX_LEAD_S, "top_camera": args.top_camera, "sensor": args.sensor, "yaw_sd_deg": args.yaw_sd,
     }
     camera_height = LineGeometry(**top_camera_preset(args.top_camera)).top_height
     vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes, "camera_height_m": camera_height}

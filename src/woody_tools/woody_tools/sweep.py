@@ -26,12 +26,10 @@ import os
 import shlex
 import sys
 import time
-import zlib
 from pathlib import Path
 
-import numpy as np
-
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
+from woody_sim.meshes import mesh_yaw
 from woody_sim.sensor_model import PRESETS
 from woody_tools import cluster
 from woody_tools.experiment import RUN_COLUMNS, RunSpec
@@ -198,14 +196,6 @@ def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int
     return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side, top_camera=top_camera,
                     sensor=sensor, yaw_deg=mesh_yaw(name, yaw_sd))
             for name in mesh_names for speed in speeds for k in ks]
-
-
-def mesh_yaw(name: str, sd_deg: float) -> float:
-    """How far a mesh lies turned on the belt with ``--yaw-sd``: ``sd_deg`` times a normal draw seeded by its
-    name, so it lies the same way at every k and speed and in every rerun (0 for ``sd_deg`` 0)."""
-    if not sd_deg:
-        return 0.0
-    return float(sd_deg * np.random.default_rng(zlib.crc32(name.encode())).standard_normal())
 
 
 def run(args: argparse.Namespace) -> int:
