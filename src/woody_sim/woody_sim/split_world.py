@@ -23,6 +23,7 @@ import numpy as np
 
 from woody_sim.child_process import ChildProcess, parent_messages
 from woody_sim.fillet_model import FilletModel
+from woody_sim.frame_schedule import DUE_SLACK
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig, check_fillet_id, check_spawn
 from woody_sim.meshes import FilletMesh
@@ -103,7 +104,7 @@ class SplitLineWorld:
         worker on the steps up to it."""
         dt = self.config.dt
         step = max(self.steps, int(until / dt) - 1)
-        while step * dt + 1e-9 < until:  # the test line_sim uses for a camera being due
+        while step * dt + DUE_SLACK < until:  # the test FrameSchedule uses for a camera being due
             step += 1
         self._send_to(step)
 
