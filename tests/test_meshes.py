@@ -109,6 +109,9 @@ def test_a_meshs_yaw_is_seeded_by_its_name_and_scales_with_the_spread() -> None:
 
     assert mesh_yaw("seed0001", 13.0) == mesh_yaw("seed0001", 13.0) != mesh_yaw("seed0002", 13.0)
     assert mesh_yaw("seed0001", 26.0) == 2.0 * mesh_yaw("seed0001", 13.0) and mesh_yaw("seed0001", 0.0) == 0.0
+    for bad in (-1.0, 46.0, math.nan):
+        with pytest.raises(ValueError, match="yaw spread"):
+            mesh_yaw("seed0001", bad)
 
 
 def test_generator_is_reproducible_per_seed() -> None:

@@ -35,7 +35,7 @@ from woody_msgs.srv import SpawnFillet
 from woody_sim.frame_schedule import FrameSchedule
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
-from woody_sim.meshes import MeshError, load_mesh, load_mesh_set, mesh_yaw, yawed
+from woody_sim.meshes import MAX_YAW_SD_DEG, MeshError, load_mesh, load_mesh_set, mesh_yaw, yawed
 from woody_sim.pacing import LeadLimiter
 from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.sensor_model import sensor_preset, to_message_array
@@ -77,7 +77,7 @@ class LineSim(Node):
                             "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
         self.yaw_sd = declare(self, "yaw_sd_deg", 0.0, "Fillets lie turned on the belt: each mesh by this many "
                               "degrees times a normal draw seeded by its name (0 = straight; woody sweep --yaw-sd).",
-                              0.0, 45.0)
+                              0.0, MAX_YAW_SD_DEG)
         seed = declare(self, "seed", 7, "Seed of the stiffness draw and generated meshes.", 0, 2**31 - 1)
         self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, 100000)
         self.spawn_duration = declare(self, "spawn_duration_s", 0.0, "Stop spawning after this much sim time "

@@ -267,10 +267,16 @@ def yawed(fillet: FilletMesh, degrees: float) -> FilletMesh:
     return FilletMesh(name=fillet.name, mesh=_centre(mesh), source=f"{fillet.source}@yaw{float(degrees):+.1f}")
 
 
+MAX_YAW_SD_DEG = 45.0
+"""Widest yaw spread accepted: wider, fillets would lie across the belt rather than turned on it."""
+
+
 def mesh_yaw(name: str, sd_deg: float) -> float:
     """How far the mesh called ``name`` lies turned on the belt for a yaw spread ``sd_deg``: ``sd_deg`` times a
     normal draw seeded by the name, so a mesh lies the same way at every k and speed, in a sweep and on the
     line, and in every rerun (0 for ``sd_deg`` 0)."""
+    if not 0.0 <= sd_deg <= MAX_YAW_SD_DEG:
+        raise ValueError(f"yaw spread must be within 0..{MAX_YAW_SD_DEG:g} degrees, got {sd_deg!r}")
     if not sd_deg:
         return 0.0
     return float(sd_deg * np.random.default_rng(zlib.crc32(name.encode())).standard_normal())

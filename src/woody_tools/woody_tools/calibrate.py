@@ -18,6 +18,10 @@ sets, targets, achieved figures) are written to ``config/calibration.yaml``
 and `woody sweep` load. The search log goes to ``--out``/calibration.json and
 calibration.md.
 
+``--yaw-sd`` lays every fillet of every step turned on the belt as `woody
+sweep --yaw-sd` and `woody run --yaw-sd` do, so a threshold can be chosen on
+the fillets it will grade; the spread is recorded in the provenance.
+
 ``--loo`` instead checks the threshold procedure itself on the reference
 (real) meshes: top-down runs at k ∈ {0, 100}, both speeds, three lanes; per
 speed, each mesh is held out once, the threshold is chosen on the others and
@@ -38,7 +42,8 @@ from pathlib import Path
 import numpy as np
 
 from woody_common.calibration import Calibration, load_calibration, write_calibration
-from woody_tools import cluster, physics_fit
+from woody_sim.meshes import mesh_yaw
+from woody_tools import cluster, fillet_options, physics_fit
 from woody_tools.experiment import RunSpec
 
 CALIBRATION_MESHES = "generated:8:9"
@@ -46,9 +51,9 @@ CALIBRATION_MESHES = "generated:8:9"
 
 The sweep's default meshes (builtin, seeds 0-2 and 10000+) are disjoint from it."""
 TEST_MESHES = "generated:8:8"
+"""Disjoint held-out set for the threshold's classification report (seeds 80000-80007)."""
 LOO_MESHES = "builtin"
 """--loo uses the reference (non-generated) meshes of this set."""
-"""Disjoint held-out set for the threshold's classification report (seeds 80000-80007)."""
 SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
 SPEEDS = (100.0, 130.0)
 
@@ -78,6 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--calibration", default=None,
                         help="calibration file to write (default config/calibration.yaml)")
     parser.add_argument("--dry-run", action="store_true", help="print the results, do not write the calibration")
+    fillet_options.add_yaw_sd(parser, "every step, --loo too; recorded in the calibration's provenance")
     parser.add_argument("--loo", action="store_true",
                         help="leave-one-mesh-out check of the threshold on the reference meshes (k 0/100, 100 and "
                              "130 FPM, with the calibrated physics); writes loo.md / loo.json, writes no calibration")
@@ -99,7 +105,7 @@ def fit_physics(names: list[str], spec: str, args: argparse.Namespace, client) -
     """Grid search of (M, c, mu) against the paper's side table; the best point's values and the log."""
     def evaluate(point: physics_fit.FitPoint) -> list[dict]:
         runs = [RunSpec(n, k, s, lanes=1, mass=point.mass, damping=point.damping,
-                        friction_static=point.friction_static, top=False)
+                        friction_static=point.friction_static, top=False, yaw_deg=mesh_yaw(n, args.yaw_sd))
                 for n in names for s in SPEEDS for k in SIDE_K]
         return _evaluate(runs, spec, client, f"M={point.mass:g} c={point.damping:g} mu={point.friction_static:g}")
 
@@ -127,7 +133,7 @@ def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict,
 
     def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
         runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
-                        friction_static=physics["friction_static"], side=False)
+                        friction_static=physics["friction_static"], side=False, yaw_deg=mesh_yaw(n, args.yaw_sd))
                 for n in names for s in SPEEDS for k in (0.0, 100.0)]
         return _evaluate(runs, spec, client, desc)
 
@@ -173,7 +179,8 @@ def _provenance(args: argparse.Namespace, report: dict) -> dict:
     """Flat key -> value record of how the calibration was made and what it reached."""
     out = {"command": "woody calibrate " + shlex.join(sys.argv[2:]), "date": time.strftime("%Y-%m-%d %H:%M:%S"),
            "calibration_meshes": args.meshes, "fit_meshes": report.get("fit_meshes", ""),
-           "test_meshes": args.test_meshes, "targets": "paper Table sv_results (NMDM at k 0/10/100/200/400, "
+           "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd,
+           "targets": "paper Table sv_results (NMDM at k 0/10/100/200/400, "
            "100 and 130 FPM); ΔNMDM(k=100-k=0) 0.20-0.32; NMDM(k=0) gain >= 0.05 at 130 FPM"}
     best = min(report.get("physics_fit", []), key=lambda e: e["objective"], default=None)
     if best is not None:
@@ -201,7 +208,7 @@ def _calibrate(args: argparse.Namespace, client) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.loo:
-        return run_loo(args.meshes or LOO_MESHES, client, out)
+        return run_loo(args.meshes or LOO_MESHES, client, out, args.yaw_sd)
     args.meshes = args.meshes or CALIBRATION_MESHES
     cal_names = list(sweep._load_meshes(args.meshes))
     test_names = list(sweep._load_meshes(args.test_meshes))
@@ -212,7 +219,8 @@ def _calibrate(args: argparse.Namespace, client) -> int:
     current = load_calibration(args.calibration)
     physics = {k: getattr(current, k)
                for k in ("total_mass_kg", "hinge_damping", "friction_static", "friction_dynamic")}
-    report: dict = {"calibration_meshes": args.meshes, "test_meshes": args.test_meshes, "started": time.ctime()}
+    report: dict = {"calibration_meshes": args.meshes, "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd,
+                    "started": time.ctime()}
     t0 = time.perf_counter()
     if not args.skip_physics:
         names = cal_names[: max(1, args.fit_meshes)]
@@ -246,6 +254,7 @@ def _write_md(path: Path, report: dict) -> None:
     physics = report["physics"]
     lines = ["# Calibration\n", f"M = **{physics['total_mass_kg']:g} kg**, c = **{physics['hinge_damping']:g}**, "
              f"mu = **{physics['friction_static']:g}**; Φ threshold = **{report.get('threshold', 'n/a')}**; "
+             f"fillets turned by a yaw sd of {report['yaw_sd_deg']:g} deg; "
              f"wall {report.get('wall_s', 0) / 60:.1f} min.\n"]
     if "physics_fit" in report:
         lines += ["| M (kg) | c | mu | NMDM k=0 | ΔNMDM | k=0 speed gain | objective |",
@@ -263,7 +272,7 @@ def _write_md(path: Path, report: dict) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def run_loo(spec: str, client, out: Path) -> int:
+def run_loo(spec: str, client, out: Path, yaw_sd: float = 0.0) -> int:
     """`woody calibrate --loo`: leave-one-mesh-out threshold check on the reference meshes of ``spec``."""
     from woody_tools import evaluation, sweep
 
@@ -273,12 +282,12 @@ def run_loo(spec: str, client, out: Path) -> int:
               file=sys.stderr)
         return 2
     mass = load_calibration().total_mass_kg
-    runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False) for n in names for s in (100.0, 130.0)
-            for k in (evaluation.NORMAL_K, evaluation.SEVERE_K)]
+    runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False, yaw_deg=mesh_yaw(n, yaw_sd)) for n in names
+            for s in (100.0, 130.0) for k in (evaluation.NORMAL_K, evaluation.SEVERE_K)]
     rows = _evaluate(runs, spec, client, f"leave-one-out ({len(names)} reference meshes)")
     units = evaluation.run_units(rows)
-    report: dict = {"meshes": names, "mass": mass, "speeds": {}}
-    lines = [f"# Leave-one-out over {len(names)} reference meshes (M = {mass:g} kg)\n"]
+    report: dict = {"meshes": names, "mass": mass, "yaw_sd_deg": yaw_sd, "speeds": {}}
+    lines = [f"# Leave-one-out over {len(names)} reference meshes (M = {mass:g} kg, yaw sd {yaw_sd:g} deg)\n"]
     for speed in (100.0, 130.0):
         folds = evaluation.leave_one_out([u for u in units if u.speed_fpm == speed])
         total = evaluation.pooled(folds)

@@ -31,7 +31,7 @@ from pathlib import Path
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
 from woody_sim.meshes import mesh_yaw
 from woody_sim.sensor_model import PRESETS
-from woody_tools import cluster
+from woody_tools import cluster, fillet_options
 from woody_tools.experiment import RUN_COLUMNS, RunSpec
 
 TOP_K = (0.0, 20.0, 40.0, 60.0, 80.0, 100.0)
@@ -76,9 +76,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m); one camera per --out folder")
-    parser.add_argument("--yaw-sd", type=float, default=0.0, metavar="DEG",
-                        help="fillets lie turned on the belt: each mesh by DEG x a normal draw seeded by its name, "
-                             "the same at every k and speed (default 0: straight); one setting per --out folder")
+    fillet_options.add_yaw_sd(parser, "one setting per --out folder")
     parser.add_argument("--traces", action="store_true",
                         help="also write Φ, Hu and solidity terms of every window frame per fillet: traces.csv and "
                              "traces/<mesh>_<speed>fpm.png (runs already done without a trace are redone)")
