@@ -43,7 +43,7 @@ import numpy as np
 
 from woody_common.calibration import Calibration, load_calibration, write_calibration
 from woody_sim.meshes import mesh_yaw
-from woody_tools import cluster, fillet_options, physics_fit
+from woody_tools import arguments, cluster, physics_fit
 from woody_tools.experiment import RunSpec
 
 CALIBRATION_MESHES = "generated:8:9"
@@ -58,14 +58,8 @@ SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
 SPEEDS = (100.0, 130.0)
 
 
-def _floats(text: str) -> list[float]:
-    values = [float(v) for v in text.split(",") if v.strip()]
-    if not values or not all(math.isfinite(v) and v > 0.0 for v in values):
-        raise argparse.ArgumentTypeError(f"expected comma-separated positive numbers, got {text!r}")
-    return values
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    positives = arguments.POSITIVE_NUMBERS
     parser.add_argument("--meshes", default=None,
                         help=f"calibration meshes (default {CALIBRATION_MESHES}; with --loo: the reference meshes of "
                              f"{LOO_MESHES})")
@@ -74,16 +68,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--test-meshes", default=TEST_MESHES,
                         help="held-out meshes for the threshold report, disjoint from --meshes "
                              f"(default {TEST_MESHES})")
-    parser.add_argument("--masses", type=_floats, default=[10.0, 20.0, 40.0], help="total masses M (kg) to try")
-    parser.add_argument("--dampings", type=_floats, default=[0.1, 0.2, 0.4], help="hinge dampers c (N m s/rad) to try")
-    parser.add_argument("--frictions", type=_floats, default=[0.8], help="drive friction caps mu_static to try")
+    parser.add_argument("--masses", type=positives, default=[10.0, 20.0, 40.0], help="total masses M (kg) to try")
+    parser.add_argument("--dampings", type=positives, default=[0.1, 0.2, 0.4],
+                        help="hinge dampers c (N m s/rad) to try")
+    parser.add_argument("--frictions", type=positives, default=[0.8], help="drive friction caps mu_static to try")
     parser.add_argument("--skip-physics", action="store_true", help="keep the current physics, choose the threshold")
     parser.add_argument("--skip-threshold", action="store_true", help="fit the physics only")
     parser.add_argument("--out", default="calibration-out", help="folder for calibration.json / calibration.md")
     parser.add_argument("--calibration", default=None,
                         help="calibration file to write (default config/calibration.yaml)")
     parser.add_argument("--dry-run", action="store_true", help="print the results, do not write the calibration")
-    fillet_options.add_yaw_sd(parser, "every step, --loo too; recorded in the calibration's provenance")
+    arguments.add_yaw_sd(parser, "every step, --loo too; recorded in the calibration's provenance")
     parser.add_argument("--loo", action="store_true",
                         help="leave-one-mesh-out check of the threshold on the reference meshes (k 0/100, 100 and "
                              "130 FPM, with the calibrated physics); writes loo.md / loo.json, writes no calibration")
@@ -206,16 +201,20 @@ def _calibrate(args: argparse.Namespace, client) -> int:
     from woody_tools import sweep
 
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     if args.loo:
         return run_loo(args.meshes or LOO_MESHES, client, out, args.yaw_sd)
     args.meshes = args.meshes or CALIBRATION_MESHES
-    cal_names = list(sweep._load_meshes(args.meshes))
-    test_names = list(sweep._load_meshes(args.test_meshes))
+    try:
+        cal_names = list(sweep._load_meshes(args.meshes))
+        test_names = list(sweep._load_meshes(args.test_meshes))
+    except ValueError as exc:  # a malformed spec or a missing path
+        print(f"woody calibrate: {exc}", file=sys.stderr)
+        return 2
     if set(cal_names) & set(test_names):
         overlap = sorted(set(cal_names) & set(test_names))
         print(f"woody calibrate: test meshes overlap the calibration meshes: {overlap}", file=sys.stderr)
         return 2
+    out.mkdir(parents=True, exist_ok=True)
     current = load_calibration(args.calibration)
     physics = {k: getattr(current, k)
                for k in ("total_mass_kg", "hinge_damping", "friction_static", "friction_dynamic")}
@@ -276,11 +275,16 @@ def run_loo(spec: str, client, out: Path, yaw_sd: float = 0.0) -> int:
     """`woody calibrate --loo`: leave-one-mesh-out threshold check on the reference meshes of ``spec``."""
     from woody_tools import evaluation, sweep
 
-    names = [n for n in sweep._load_meshes(spec) if evaluation.mesh_set(n) == evaluation.SET_REFERENCE]
+    try:
+        names = [n for n in sweep._load_meshes(spec) if evaluation.mesh_set(n) == evaluation.SET_REFERENCE]
+    except ValueError as exc:
+        print(f"woody calibrate: {exc}", file=sys.stderr)
+        return 2
     if len(names) < 2:
         print(f"woody calibrate: --loo needs at least two reference (non-generated) meshes in '{spec}', got {names}",
               file=sys.stderr)
         return 2
+    out.mkdir(parents=True, exist_ok=True)
     mass = load_calibration().total_mass_kg
     runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False, yaw_deg=mesh_yaw(n, yaw_sd)) for n in names
             for s in (100.0, 130.0) for k in (evaluation.NORMAL_K, evaluation.SEVERE_K)]

@@ -26,7 +26,7 @@ from woody_common.line import SPEED_RANGE_FPM
 from woody_common.stamps import stamp_to_seconds
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
 from woody_sim.sensor_model import PRESETS
-from woody_tools import fillet_options
+from woody_tools import arguments
 from woody_tools.cpu_usage import CpuAccounting
 from woody_tools.processes import DomainInUse, NodeProcess, lease_domain
 from woody_tools.run_report import Spawn, Verdict, build_report, join, verdict_table, write_csv
@@ -54,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m)")
-    fillet_options.add_yaw_sd(parser, "line_sim's yaw_sd_deg")
+    arguments.add_yaw_sd(parser, "line_sim's yaw_sd_deg")
     parser.add_argument("--calibration", default=str(CALIBRATION_PATH),
                         help="calibration file given to line_sim and the grader as a ROS params file "
                              "(default config/calibration.yaml)")

@@ -31,7 +31,7 @@ from pathlib import Path
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
 from woody_sim.meshes import mesh_yaw
 from woody_sim.sensor_model import PRESETS
-from woody_tools import cluster, fillet_options
+from woody_tools import arguments, cluster
 from woody_tools.experiment import RUN_COLUMNS, RunSpec
 
 TOP_K = (0.0, 20.0, 40.0, 60.0, 80.0, 100.0)
@@ -46,37 +46,27 @@ META_FILE = "sweep_meta.json"
 CSV_FILE = "runs.csv"
 
 
-def _floats(text: str) -> list[float]:
-    try:
-        values = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
-    if not values:
-        raise argparse.ArgumentTypeError("empty list")
-    return values
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--meshes", default=DEFAULT_MESHES,
                         help="mesh set: builtin, generated:N[:SEED], a folder or file; comma-combinable "
                              f"(default {DEFAULT_MESHES})")
-    parser.add_argument("--k", type=_floats, default=list(DEFAULT_K),
+    parser.add_argument("--k", type=arguments.STIFFNESSES, default=list(DEFAULT_K),
                         help="hinge stiffnesses, comma-separated (default: union of the paper's top-down "
                              "0..100 and side-view 0,10,100,200,400)")
-    parser.add_argument("--speeds", type=_floats, default=list(DEFAULT_SPEEDS),
+    parser.add_argument("--speeds", type=arguments.LINE_SPEEDS, default=list(DEFAULT_SPEEDS),
                         help="line speeds in FPM (default 100,130)")
     parser.add_argument("--lanes", type=int, default=3,
                         help="identical fillets side by side per run: one simulated chain, seen in every lane "
                              "(default 3)")
     parser.add_argument("--out", default="sweep-out", help="output folder (runs.csv, results.md, *.png)")
-    parser.add_argument("--mass", type=float, default=None,
+    parser.add_argument("--mass", type=arguments.POSITIVE_NUMBER, default=None,
                         help="total chain mass M in kg (default: the calibrated one, config/calibration.yaml)")
     parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
                         help="top camera error model (docs/sensors.md); use its own --out; default ideal")
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m); one camera per --out folder")
-    fillet_options.add_yaw_sd(parser, "one setting per --out folder")
+    arguments.add_yaw_sd(parser, "one setting per --out folder")
     parser.add_argument("--traces", action="store_true",
                         help="also write Φ, Hu and solidity terms of every window frame per fillet: traces.csv and "
                              "traces/<mesh>_<speed>fpm.png (runs already done without a trace are redone)")

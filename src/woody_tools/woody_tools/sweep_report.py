@@ -563,6 +563,7 @@ def _plot_roc(plt, rows, speeds, lanes):
     ax.set_xlabel("false-positive rate (normal called woody)")
     ax.set_ylabel("true-positive rate (severe called woody)")
     ax.set_title("ROC of Φ: normal k=0 vs severe k=100\n(dotted: single lanes)", fontsize=9)
-    ax.legend(fontsize=7, loc="lower right")
+    if ax.get_legend_handles_labels()[0]:  # no curve when the sweep lacks k = 0 or k = 100
+        ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3)
     return fig

@@ -1,0 +1,54 @@
+"""Argument types the woody commands share, so a bad value stops a command with one line before it starts."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+
+from woody_common.line import SPEED_RANGE_FPM
+from woody_sim.meshes import MAX_YAW_SD_DEG
+
+
+def number(check: Callable[[float], bool], requirement: str) -> Callable[[str], float]:
+    """An argparse type: one number passing ``check``; ``requirement`` says what the check asks."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not check(value):
+            raise argparse.ArgumentTypeError(f"{requirement}, got {text}")
+        return value
+    return parse
+
+
+def number_list(check: Callable[[float], bool], requirement: str) -> Callable[[str], list[float]]:
+    """An argparse type: comma-separated numbers, every one passing ``check``."""
+    one = number(check, requirement)
+
+    def parse(text: str) -> list[float]:
+        items = [item.strip() for item in text.split(",") if item.strip()]
+        if not items:
+            raise argparse.ArgumentTypeError("expected at least one number")
+        return [one(item) for item in items]
+    return parse
+
+
+def _positive(value: float) -> bool:
+    return math.isfinite(value) and value > 0.0
+
+
+POSITIVE_NUMBER = number(_positive, "must be a positive number")
+POSITIVE_NUMBERS = number_list(_positive, "every value must be a positive number")
+STIFFNESSES = number_list(lambda k: math.isfinite(k) and k >= 0.0, "every k must be a finite number >= 0")
+LINE_SPEEDS = number_list(lambda s: SPEED_RANGE_FPM[0] <= s <= SPEED_RANGE_FPM[1],
+                          f"every speed must be within {SPEED_RANGE_FPM[0]:g}..{SPEED_RANGE_FPM[1]:g} FPM")
+YAW_SPREAD = number(lambda deg: 0.0 <= deg <= MAX_YAW_SD_DEG, f"must be within 0..{MAX_YAW_SD_DEG:g} degrees")
+
+
+def add_yaw_sd(parser: argparse.ArgumentParser, scope: str) -> None:
+    """``--yaw-sd DEG`` (woody_sim.meshes.mesh_yaw); ``scope`` ends the help with where the setting applies."""
+    parser.add_argument("--yaw-sd", type=YAW_SPREAD, default=0.0, metavar="DEG",
+                        help="fillets lie turned on the belt: each mesh by DEG x a normal draw seeded by its name, "
+                             f"the same at every k and speed (default 0: straight; {scope})")
