@@ -8,8 +8,7 @@ import sys
 
 import pytest
 
-from woody_tools.arguments import (LINE_SPEEDS, POSITIVE_NUMBER, POSITIVE_NUMBERS, STIFFNESSES, YAW_SPREAD,
-                                   add_yaw_sd)
+from woody_tools.arguments import LINE_SPEEDS, POSITIVE_NUMBER, POSITIVE_NUMBERS, STIFFNESSES, YAW_SPREAD, add_yaw_sd
 
 
 def _refused(parse, text: str) -> str:

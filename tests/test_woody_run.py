@@ -110,6 +110,8 @@ def other_run_holds(tmp_path):
 @pytest.mark.parametrize("setup,args,message", [
     (None, ["--k", "0", "nan"], "--k values must be finite and >= 0, got 0 nan"),
     (None, ["--speed-fpm", "0.5"], "--speed-fpm must be in [1, 400], got 0.5"),
+    (None, ["--duration", "-1"], "--duration must be in (0, 1e+06] sim seconds, got -1"),
+    (None, ["--side-rate", "500"], "--side-rate must be in [0, 400] Hz (0: no side camera), got 500"),
     (None, ["--out", "/proc/woody/run"], "--out /proc/woody/run: cannot write there"),
     ("existing", ["--out", "{tmp}/run"], "already holds a run (line.mcap); pass --force"),
     ("locked", ["--out", "{tmp}/run"], "is in use by another woody run"),
@@ -130,7 +132,8 @@ def test_bad_run_input_is_refused_with_one_line(tmp_path, other_run_holds, setup
         (tmp_path / "meshes").mkdir()
         (tmp_path / "meshes" / "a.stl").write_bytes(bytes(300))
     args = args if "--out" in args else [*args, "--out", "{tmp}/default"]
-    result = woody_run("--fillets", "1", *[a.format(tmp=tmp_path) for a in args], env=env)
+    count = [] if "--duration" in args else ["--fillets", "1"]
+    result = woody_run(*count, *[a.format(tmp=tmp_path) for a in args], env=env)
     assert result.returncode == 2, result.stderr
     lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
     expected = message.format(tmp=tmp_path, domain=env.get("ROS_DOMAIN_ID"))

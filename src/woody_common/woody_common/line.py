@@ -11,6 +11,10 @@ FPM_TO_MPS = 0.3048 / 60.0
 
 SPEED_RANGE_FPM = (1.0, 400.0)
 """Line speeds every entry point accepts (woody run, line_sim, reject_gate), inclusive."""
+MAX_SIDE_RATE_HZ = 400.0
+"""Fastest side camera line_sim and woody run accept (0 turns it off)."""
+MAX_SPAWN_DURATION_S = 1e6
+"""Longest spawning time (sim seconds) line_sim and woody run accept."""
 
 LANES = 3
 LANE_PITCH_M = 0.16

@@ -27,7 +27,7 @@ from std_msgs.msg import Header
 from woody_common import topics
 from woody_common.calibration import load_calibration
 from woody_common.images import image_message
-from woody_common.line import LANES, SPEED_RANGE_FPM, fpm_to_mps
+from woody_common.line import LANES, MAX_SIDE_RATE_HZ, MAX_SPAWN_DURATION_S, SPEED_RANGE_FPM, fpm_to_mps
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
@@ -81,7 +81,7 @@ class LineSim(Node):
         seed = declare(self, "seed", 7, "Seed of the stiffness draw and generated meshes.", 0, 2**31 - 1)
         self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, 100000)
         self.spawn_duration = declare(self, "spawn_duration_s", 0.0, "Stop spawning after this much sim time "
-                                      "(0 = no limit).", 0.0, 1e6)
+                                      "(0 = no limit).", 0.0, MAX_SPAWN_DURATION_S)
         spacing = declare(self, "spawn_spacing_m", 0.45, "Belt distance between fillets in a lane (m).", 0.25, 10.0)
         rate = declare(self, "fillets_per_minute", 0.0, "Spawn rate per lane; overrides spacing when > 0.", 0.0, 200.0)
         calibration = load_calibration()
@@ -96,7 +96,8 @@ class LineSim(Node):
         workers = declare(self, "physics_workers", 1, "Worker processes that simulate every other fillet on "
                           "another core (0 = all physics in this process).", 0, 1)
         top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
-        side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0, 400.0)
+        side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0,
+                            MAX_SIDE_RATE_HZ)
         side_idle = declare(self, "side_idle_rate_hz", 2.0, "Side frame rate while no fillet of the watched lane "
                             "is in its view (frames just after one leaves go at side_rate_hz).", 0.1, 400.0)
         side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from woody_common import topics
 from woody_common.calibration import DEFAULT_PATH as CALIBRATION_PATH
-from woody_common.line import SPEED_RANGE_FPM
+from woody_common.line import MAX_SIDE_RATE_HZ, MAX_SPAWN_DURATION_S, SPEED_RANGE_FPM
 from woody_common.stamps import stamp_to_seconds
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
 from woody_sim.sensor_model import PRESETS
@@ -81,6 +81,11 @@ def _validate(args: argparse.Namespace) -> None:
         raise RunRefused(f"--speed-fpm must be in [{low:g}, {high:g}], got {args.speed_fpm}")
     if args.fillets is not None and args.fillets < 1:
         raise RunRefused(f"--fillets must be >= 1, got {args.fillets}")
+    if args.duration is not None and not 0.0 < args.duration <= MAX_SPAWN_DURATION_S:
+        raise RunRefused(f"--duration must be in (0, {MAX_SPAWN_DURATION_S:g}] sim seconds, got {args.duration:g}")
+    if not 0.0 <= args.side_rate <= MAX_SIDE_RATE_HZ:
+        raise RunRefused(f"--side-rate must be in [0, {MAX_SIDE_RATE_HZ:g}] Hz (0: no side camera), "
+                         f"got {args.side_rate:g}")
     if not all(0 <= k < math.inf for k in args.k):
         raise RunRefused(f"--k values must be finite and >= 0, got {' '.join(f'{k:g}' for k in args.k)}")
     if args.namespace and not re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", args.namespace):
