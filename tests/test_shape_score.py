@@ -262,7 +262,8 @@ def test_a_degenerate_frame_in_the_window_is_counted_but_not_scored():
     contours = translating(80)
     _, plain, _ = run_evaluator(contours)
     opens = round(plain.trace[0].stamp * FPS)
-    line = polygon_contour([(300, opens * 3 + 20), (300, opens * 3 + 60), (300, opens * 3 + 90)])
+    trailing, leading = rows_of(contours[opens + 1])  # a line over the fillet's own rows: no merge
+    line = polygon_contour([(300, trailing), (300, (trailing + leading) / 2), (300, leading)])
     _, result, _ = run_evaluator(contours[:opens + 1] + [line] + contours[opens + 2:])
     assert result.frames == plain.frames and math.isnan(result.trace[1].phi)
     assert result.phi == pytest.approx(plain.phi, abs=1e-9)

@@ -23,9 +23,12 @@ DEFAULT_PATH = Path(__file__).resolve().parents[3] / "config" / "calibration.yam
 
 _SECTIONS = {"line_sim": {"total_mass_kg": "mass", "hinge_damping": "damping", "friction_static": "friction_static",
                           "friction_dynamic": "friction_dynamic"},
-             "grader": {"phi_threshold": "threshold"}}
+             "grader": {"phi_threshold": "threshold", "line_threshold": "line_threshold",
+                        "moderate_threshold": "moderate_threshold", "severe_threshold": "severe_threshold"}}
 """Per node: dataclass field -> the node's parameter name."""
 _PROVENANCE = "woody_calibration"
+CUT_FIELDS = ("line_threshold", "moderate_threshold", "severe_threshold")
+"""Fields that are cuts (three numbers each) rather than single values."""
 
 
 @dataclass(frozen=True)
@@ -41,7 +44,13 @@ class Calibration:
     friction_dynamic: float
     """Coulomb cap once it slips."""
     phi_threshold: float
-    """Φ at or below which a fillet is woody."""
+    """The paper's rule: Φ strictly below this is woody."""
+    line_threshold: tuple[float, float, float]
+    """The line's reject cut on ``line_phi``: [base, speed_slope, blunt_offset] (woody_vision.grading.Cut)."""
+    moderate_threshold: tuple[float, float, float]
+    """The grade's normal/moderate cut on ``line_phi``, same form."""
+    severe_threshold: tuple[float, float, float]
+    """The grade's moderate/severe cut on ``line_phi``, same form."""
     provenance: dict = field(default_factory=dict, compare=False)
     """command, date, mesh sets, targets and achieved figures (free-form, flat str/float values)."""
 
@@ -50,6 +59,12 @@ class Calibration:
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0.0:
                 raise ValueError(f"calibration: {name} must be a finite number >= 0, got {value!r}")
+        for name in CUT_FIELDS:
+            value = getattr(self, name)
+            if (not isinstance(value, (list, tuple)) or len(value) != 3
+                    or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in value) or value[0] <= 0):
+                raise ValueError(f"calibration: {name} must be [base > 0, speed_slope, blunt_offset], got {value!r}")
+            object.__setattr__(self, name, tuple(float(v) for v in value))
         if self.total_mass_kg <= 0.0:
             raise ValueError(f"calibration: total_mass_kg must be > 0, got {self.total_mass_kg}")
 
@@ -69,7 +84,7 @@ def load_calibration(path: str | Path | None = None) -> Calibration:
     try:
         for node, names in _SECTIONS.items():
             params = data[_node_key(node)]["ros__parameters"]
-            values.update({name: float(params[param]) for name, param in names.items()})
+            values.update({name: _value(params[param], name) for name, param in names.items()})
         provenance = dict(data.get(_node_key(_PROVENANCE), {}).get("ros__parameters", {}))
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ValueError(f"{path}: not a woody calibration file ({exc!r} missing or malformed)") from None
@@ -79,7 +94,7 @@ def load_calibration(path: str | Path | None = None) -> Calibration:
 def write_calibration(calibration: Calibration, path: str | Path | None = None, header: str = "") -> Path:
     """Write ``calibration`` as a ROS 2 parameters file (atomically: a reader never sees half a file)."""
     path = Path(path) if path is not None else DEFAULT_PATH
-    values = {name: float(value) for name, value in asdict(calibration).items() if name != "provenance"}
+    values = {name: _value(value, name) for name, value in asdict(calibration).items() if name != "provenance"}
     data = {_node_key(node): {"ros__parameters": {param: values[name] for name, param in names.items()}}
             for node, names in _SECTIONS.items()}
     data[_node_key(_PROVENANCE)] = {"ros__parameters": {k: _plain(v) for k, v in calibration.provenance.items()}}
@@ -88,6 +103,11 @@ def write_calibration(calibration: Calibration, path: str | Path | None = None, 
     tmp.write_text(text)
     tmp.replace(path)
     return path
+
+
+def _value(value, name: str):
+    """A parameter's value: a list of floats for a cut, else a float."""
+    return [float(v) for v in value] if name in CUT_FIELDS else float(value)
 
 
 def _plain(value):

@@ -34,3 +34,8 @@ SIDE_ROLLER_RADIUS_PX = 48.0
 def fpm_to_mps(speed_fpm: float) -> float:
     """Convert the user-facing line speed in feet per minute to m/s."""
     return float(speed_fpm) * FPM_TO_MPS
+
+
+REFERENCE_SPEED_FPM = 100.0
+"""The paper's line speed: the default of every entry point, and where a speed-dependent cut takes its base."""
+REFERENCE_SPEED_MPS = REFERENCE_SPEED_FPM * FPM_TO_MPS

@@ -12,6 +12,7 @@ sim time, so each fillet still gets exactly one verdict.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -19,8 +20,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from woody_common.calibration import load_calibration
-from woody_vision.grading import GradingRules
-from woody_vision.shape_score import REASON_STARTED_PAST_EDGE, STATUS_SCORED, ShapeEvaluator, ShapeResult
+from woody_vision.grading import FilletConditions, GradingRules
+from woody_vision.shape_score import (
+    LEADING_BLUNT,
+    REASON_STARTED_PAST_EDGE,
+    STATUS_SCORED,
+    ShapeEvaluator,
+    ShapeResult,
+)
 from woody_vision.side_view import SideMeasurement
 
 DEFAULT_SIDE_WAIT_S = 0.8
@@ -28,6 +35,11 @@ DEFAULT_SIDE_WAIT_S = 0.8
 
 SIDE_MATCH_SLACK_S = 0.3
 """A side passage matches a top-down window closing up to this long before or after the passage."""
+
+
+def calibrated_rules(calibration) -> GradingRules:
+    """The line's rules from a calibration: the reject cut and the grade's two cuts on ``line_phi``."""
+    return GradingRules(calibration.line_threshold, calibration.moderate_threshold, calibration.severe_threshold)
 
 
 @dataclass(frozen=True)
@@ -52,11 +64,21 @@ class GradedFillet:
     grade: str
     """'normal' / 'moderate' / 'severe' when grading, else ''."""
     side: SideMeasurement | None = None
+    score: float = math.nan
+    """The score the decision used (``line_phi`` or the paper's Φ, see :class:`FilletGrader`)."""
+    conditions: FilletConditions | None = None
+    """What the top camera measured of the fillet's speed and direction."""
+    threshold: float = math.nan
+    """The reject cut's value for this fillet."""
 
     @property
     def scored(self) -> bool:
         return self.shape.status == STATUS_SCORED
 
+
+SCORE_LINE = "line"
+SCORE_PAPER = "paper"
+SCORES = (SCORE_LINE, SCORE_PAPER)
 
 MIN_SIGHTINGS = 3
 """Frames a track must be seen in before its end gives a verdict."""
@@ -73,13 +95,19 @@ class FilletGrader:
     """Per-track shape evaluation, classification and side-view pairing."""
 
     edge_row: float
-    rules: GradingRules = field(default_factory=lambda: GradingRules(load_calibration().phi_threshold))
-    """Default: the calibrated threshold (config/calibration.yaml)."""
+    rules: GradingRules = field(default_factory=lambda: calibrated_rules(load_calibration()))
+    """Default: the calibrated line cuts (config/calibration.yaml)."""
     watched_lane: int | None = None
     side_wait_s: float = DEFAULT_SIDE_WAIT_S
     evaluator_options: dict = field(default_factory=dict)
+    pixels_per_metre: float = math.nan
+    """Top camera pixels per metre on the belt plane (focal length / height): turns image speed into m/s."""
+    score: str = SCORE_LINE
+    """'line': grade ``line_phi`` (the default, robust to speed, direction and turn); 'paper': the paper's Φ."""
 
     def __post_init__(self) -> None:
+        if self.score not in SCORES:
+            raise ValueError(f"score must be one of {', '.join(SCORES)}, got {self.score!r}")
         if self.side_wait_s < 0:
             raise ValueError(f"side_wait_s must be >= 0, got {self.side_wait_s}")
         ShapeEvaluator(self.edge_row, **self.evaluator_options)  # validate options now
@@ -146,15 +174,23 @@ class FilletGrader:
         if result.reason == REASON_STARTED_PAST_EDGE and self._lane_has_approached(lane, track_id):
             self.fragments += 1
             return []
-        if result.status == STATUS_SCORED and math.isfinite(result.phi):
-            classification = self.rules.classify(result.phi)
-            graded = GradedFillet(track_id, lane, result, classification.label, classification.grade or "")
-        else:
-            graded = GradedFillet(track_id, lane, result, "unscored", "")
+        graded = self._classify(track_id, lane, result)
         if self.watched_lane is None or lane != self.watched_lane or not graded.scored:
             return [graded]
         self._pending.append(_Pending(graded, deadline=(result.stamp or self.now) + self.side_wait_s))
         return []
+
+    def _classify(self, track_id: int, lane: int, result: ShapeResult) -> GradedFillet:
+        """The verdict of a finished window: scored and classified, or unscored with its reason."""
+        paper = self.score == SCORE_PAPER
+        score = result.phi if paper else result.line_phi
+        usable = result.window_closed if paper else result.status == STATUS_SCORED
+        conditions = FilletConditions(result.speed_px_s / self.pixels_per_metre, result.leading_end == LEADING_BLUNT)
+        if not (usable and math.isfinite(score)):
+            return GradedFillet(track_id, lane, result, "unscored", "", conditions=conditions)
+        decision = self.rules.classify(score, conditions)
+        return GradedFillet(track_id, lane, result, decision.label, decision.grade or "", score=score,
+                            conditions=conditions, threshold=decision.threshold)
 
     def _lane_has_approached(self, lane: int, track_id: int) -> bool:
         """Whether another live track of ``lane`` was seen flat before the edge.
@@ -176,4 +212,4 @@ class FilletGrader:
 
 
 def _with_side(graded: GradedFillet, side: SideMeasurement) -> GradedFillet:
-    return GradedFillet(graded.fillet_id, graded.lane, graded.shape, graded.label, graded.grade, side)
+    return dataclasses.replace(graded, side=side)

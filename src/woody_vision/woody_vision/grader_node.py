@@ -36,11 +36,19 @@ from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletTrackArray, FilletVerdict
 from woody_vision.camera_model import edge_row
 from woody_vision.frame_checks import FrameChecker, FrameError
-from woody_vision.grader_core import DEFAULT_SIDE_WAIT_S, FilletGrader, GradedFillet, TrackObservation
-from woody_vision.grading import GradingRules
+from woody_vision.grader_core import (
+    DEFAULT_SIDE_WAIT_S,
+    SCORE_LINE,
+    SCORE_PAPER,
+    SCORES,
+    FilletGrader,
+    GradedFillet,
+    TrackObservation,
+)
+from woody_vision.grading import Cut, FilletConditions, GradingRules
 from woody_vision.image_encodings import color_rgb
 from woody_vision.image_qos import declare_image_qos
-from woody_vision.shape_score import TIP_WIDTH_RATIO, W1, W2
+from woody_vision.shape_score import LINE_OVERHANG_FRACTION, TIP_WIDTH_RATIO, W1, W2
 from woody_vision.side_view import SidePassageTracker
 
 MARKER_COLOURS = {"pending": ColorRGBA(r=1.0, g=0.85, b=0.0, a=1.0), "normal": ColorRGBA(g=0.8, a=1.0),
@@ -60,13 +68,20 @@ class Grader(Node):
 
     def __init__(self) -> None:
         super().__init__("grader")
-        threshold = declare(self, "threshold", load_calibration().phi_threshold,
-                            "Φ below this is woody (stiff fillets deform less); the default is the calibrated one.",
-                            0.001, 1000.0)
-        moderate = declare(self, "moderate_threshold", 0.0, "Φ below this grades at least moderate (0 = threshold).",
-                           0.0, 1000.0)
-        severe = declare(self, "severe_threshold", 0.0, "Φ below this grades severe (0 = no grades).", 0.0, 1000.0)
-        self.rules = GradingRules(threshold, moderate or None, severe or None)
+        calibration = load_calibration()
+        self.score = declare(self, "score", SCORE_LINE, "What the verdict grades: line (line_phi against cuts that "
+                             "follow the measured speed and leading end; robust on a messy line) or paper (the "
+                             "paper's Φ against the single threshold; no grade).")
+        if self.score not in SCORES:
+            raise ValueError(f"score must be one of {', '.join(SCORES)}, got {self.score!r}")
+        paper = declare(self, "threshold", calibration.phi_threshold, "With score paper: Φ below this is woody "
+                        "(stiff fillets deform less); the default is the calibrated one.", 0.001, 1000.0)
+        cuts = [Cut.of(declare(self, name, list(getattr(calibration, name)), text)) for name, text in (
+            ("line_threshold", "With score line: the reject cut on line_phi, [base at 100 FPM narrow end first, "
+             "d ln(cut)/d speed per m/s, ln offset blunt end first]; the default is the calibrated one."),
+            ("moderate_threshold", "With score line: line_phi below this cut grades at least moderate (same form)."),
+            ("severe_threshold", "With score line: line_phi below this cut grades severe (same form)."))]
+        self.rules = GradingRules(paper) if self.score == SCORE_PAPER else GradingRules(*cuts)
         self.camera_height = declare(self, "camera_height_m", TOP_CAMERA_HEIGHT_M,
                                      "Top camera height above the belt (m).", 0.05, 10.0)
         self.edge_offset = declare(self, "roller_edge_offset_m", TOP_EDGE_OFFSET_M,
@@ -77,6 +92,8 @@ class Grader(Node):
             w2=declare(self, "w2", W2, "Weight of the solidity term of Φ.", 0.0, 1e6),
             tip_ratio=declare(self, "tip_ratio", TIP_WIDTH_RATIO, "The reference's narrow leading end is cut up to the "
                               "first line at least this fraction of the maximum body width.", 0.01, 0.99),
+            line_fraction=declare(self, "line_fraction", LINE_OVERHANG_FRACTION, "line_phi is Φ_t where the rigid "
+                                  "overhang is this fraction of the body length.", 0.1, 0.9),
         )
         lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, 6)
         side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
@@ -120,7 +137,7 @@ class Grader(Node):
         if self.core is None and info.k[0] > 0:
             row = edge_row(tuple(info.k), self.camera_height, self.edge_offset)
             self.core = FilletGrader(row, self.rules, self.watched_lane if self.side else None, self.side_wait,
-                                     self.evaluator_options)
+                                     self.evaluator_options, info.k[4] / self.camera_height, self.score)
             self.get_logger().info(f"roller edge at image row {row:.1f} (from camera_info K, camera height "
                                    f"{self.camera_height} m, edge offset {self.edge_offset} m)")
             early, self.early_tracks = self.early_tracks, deque()
@@ -185,13 +202,18 @@ class Grader(Node):
 
     def to_msg(self, fillet: GradedFillet) -> FilletVerdict:
         shape, side, nan = fillet.shape, fillet.side, math.nan
+        conditions = fillet.conditions or FilletConditions(nan)
         msg = FilletVerdict(
             fillet_id=fillet.fillet_id, lane=max(fillet.lane, 0), classification=LABELS[fillet.label],
-            grade=fillet.grade, unscored_reason=shape.reason, phi=_finite_or_nan(shape.phi),
+            grade=fillet.grade, unscored_reason=shape.reason, score=_finite_or_nan(fillet.score),
+            line_phi=_finite_or_nan(shape.line_phi), line_fraction=shape.line_fraction,
+            speed=_finite_or_nan(conditions.speed_mps), leading_end=shape.leading_end,
+            rejected_frames=shape.rejected_frames, phi=_finite_or_nan(shape.phi),
             hu_term=_finite_or_nan(shape.hu_term), solidity_term=_finite_or_nan(shape.solidity_term),
-            threshold=self.rules.threshold, moderate_threshold=self.rules.grade_moderate_threshold
-            if self.rules.severe_threshold else nan, severe_threshold=self.rules.severe_threshold or nan,
-            frames_in_window=shape.frames, side_measured=side is not None,
+            threshold=self.rules.threshold.at(conditions), frames_in_window=shape.frames,
+            moderate_threshold=self.rules.grade_moderate_threshold.at(conditions) if self.rules.severe_threshold
+            else nan, severe_threshold=self.rules.severe_threshold.at(conditions) if self.rules.severe_threshold
+            else nan, side_measured=side is not None,
             nmdm=side.nmdm if side else nan, mdm=side.mdm_min_px if side else nan, be=side.be if side else nan)
         msg.header.stamp = seconds_to_stamp(shape.stamp if shape.stamp is not None else self.core.now)
         msg.header.frame_id = self.frame_id

@@ -1,13 +1,24 @@
-"""Woody-breast decision from the top-down shape score Φ.
+"""Woody-breast decision from a shape score, with cuts that follow the measured line conditions.
 
 A stiff (woody) fillet keeps its outline as it crosses the roller edge, so it
-scores a LOW Φ; a normal, flexible fillet drapes and scores high (paper, 100 FPM:
-normal k=0 Φ≈19, severe k=100 Φ≈5.4). Hence ``phi < threshold`` means woody.
+scores a LOW shape score; a normal, flexible fillet drapes and scores high
+(paper, 100 FPM: normal k=0 Φ≈19, severe k=100 Φ≈5.4). Hence a fillet is
+woody when its score is strictly below the cut.
 
-The optional three-way grade uses its own two boundaries, independent of the
-binary reject threshold: 'normal' for Φ ≥ moderate_threshold, 'moderate' for
-severe_threshold ≤ Φ < moderate_threshold, 'severe' below severe_threshold.
-``moderate_threshold`` defaults to ``threshold``.
+A cut (:class:`Cut`) may depend on what the top camera measures of each
+fillet: ln(cut) = ln(base) + speed_slope · (v − v_ref) + blunt_offset · b,
+with v the fillet's measured speed (m/s), v_ref 100 FPM and b = 1 when it
+travels blunt end first. A fillet drapes less at a higher speed (it leaves
+the roller in a flatter arc) and a blunt leading end bends less than a
+tapered one, for normal and woody meat alike, so one constant cut cannot fit
+a line whose speed and fillet direction vary. `woody calibrate` fits three
+cuts: the reject cut (normal vs severe) and the grade's normal/moderate and
+moderate/severe cuts. A constant cut (both slopes 0) is the paper's single
+threshold.
+
+The three-way grade uses its own two cuts, independent of the reject cut:
+'normal' at or above the moderate cut, 'moderate' between, 'severe' below the
+severe cut.
 """
 
 from __future__ import annotations
@@ -15,6 +26,8 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
+
+from woody_common.line import REFERENCE_SPEED_MPS
 
 LABEL_NORMAL = "normal"
 LABEL_WOODY = "woody"
@@ -24,63 +37,117 @@ GRADE_SEVERE = "severe"
 
 
 @dataclass(frozen=True)
+class FilletConditions:
+    """What the decision may depend on, as measured for one fillet."""
+
+    speed_mps: float = REFERENCE_SPEED_MPS
+    blunt_first: bool = False
+
+
+TIDY = FilletConditions()
+"""The paper's line: 100 FPM, narrow end first."""
+
+
+@dataclass(frozen=True)
+class Cut:
+    """A cut on the shape score: ln(cut) = ln(base) + speed_slope·(v − v_ref) + blunt_offset·[blunt first]."""
+
+    base: float
+    """The cut at 100 FPM, narrow end first."""
+    speed_slope: float = 0.0
+    """d ln(cut) / dv, per m/s."""
+    blunt_offset: float = 0.0
+    """Added to ln(cut) for a fillet travelling blunt end first."""
+
+    def __post_init__(self) -> None:
+        _require_positive_finite("cut base", self.base)
+        for name in ("speed_slope", "blunt_offset"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"cut {name} must be finite, got {getattr(self, name)}")
+
+    @classmethod
+    def of(cls, value: Cut | float | list | tuple) -> Cut:
+        """A cut from a number (constant), a [base, speed_slope, blunt_offset] list or a cut."""
+        if isinstance(value, Cut):
+            return value
+        if isinstance(value, (list, tuple)):
+            if len(value) != 3:
+                raise ValueError(f"a cut is [base, speed_slope, blunt_offset], got {list(value)}")
+            return cls(*(float(v) for v in value))
+        _require_positive_finite("threshold", value)
+        return cls(float(value))
+
+    def as_list(self) -> list[float]:
+        return [self.base, self.speed_slope, self.blunt_offset]
+
+    def at(self, conditions: FilletConditions = TIDY) -> float:
+        """The cut's value for a fillet measured under ``conditions``."""
+        speed = conditions.speed_mps if math.isfinite(conditions.speed_mps) else REFERENCE_SPEED_MPS
+        return self.base * math.exp(self.speed_slope * (speed - REFERENCE_SPEED_MPS)
+                                    + self.blunt_offset * bool(conditions.blunt_first))
+
+
+@dataclass(frozen=True)
 class Classification:
     """Decision for one fillet."""
 
     label: str
     """'normal' or 'woody' (the reject decision)."""
     grade: str | None
-    """'normal', 'moderate' or 'severe'; None when the rules have no grade thresholds."""
+    """'normal', 'moderate' or 'severe'; None when the rules have no grade cuts."""
+    threshold: float
+    """The reject cut's value for this fillet."""
 
 
 @dataclass(frozen=True)
 class GradingRules:
-    """Thresholds on Φ; validated on construction."""
+    """Cuts on the shape score (numbers or :class:`Cut`); validated on construction."""
 
-    threshold: float
-    """The binary cut; the calibrated one is in config/calibration.yaml (`woody calibrate`)."""
-    moderate_threshold: float | None = None
-    severe_threshold: float | None = None
+    threshold: Cut
+    """The reject cut; the calibrated one is in config/calibration.yaml (`woody calibrate`)."""
+    moderate_threshold: Cut | None = None
+    severe_threshold: Cut | None = None
 
     def __post_init__(self) -> None:
-        _require_positive_finite("threshold", self.threshold)
+        object.__setattr__(self, "threshold", Cut.of(self.threshold))
         if self.moderate_threshold is not None and self.severe_threshold is None:
             raise ValueError("moderate_threshold needs severe_threshold as well: the grade has two boundaries")
         if self.severe_threshold is None:
             return
-        _require_positive_finite("severe_threshold", self.severe_threshold)
+        object.__setattr__(self, "severe_threshold", Cut.of(self.severe_threshold))
         if self.moderate_threshold is not None:
-            _require_positive_finite("moderate_threshold", self.moderate_threshold)
-        if not self.severe_threshold < self.grade_moderate_threshold:
-            raise ValueError(
-                f"severe_threshold ({self.severe_threshold}) must be below the moderate boundary "
-                f"({self.grade_moderate_threshold}): severe fillets are stiffer and score lower Φ"
-            )
+            object.__setattr__(self, "moderate_threshold", Cut.of(self.moderate_threshold))
+        for conditions in (TIDY, FilletConditions(blunt_first=True)):
+            if not self.severe_threshold.at(conditions) < self.grade_moderate_threshold.at(conditions):
+                raise ValueError(
+                    f"severe_threshold ({self.severe_threshold.at(conditions):g}) must be below the moderate "
+                    f"boundary ({self.grade_moderate_threshold.at(conditions):g}): severe fillets score lower")
 
     @property
-    def grade_moderate_threshold(self) -> float:
-        """The effective normal/moderate boundary (``moderate_threshold`` or ``threshold``)."""
+    def grade_moderate_threshold(self) -> Cut:
+        """The effective normal/moderate cut (``moderate_threshold`` or ``threshold``)."""
         return self.threshold if self.moderate_threshold is None else self.moderate_threshold
 
-    def is_woody(self, phi: float) -> bool:
-        """True when Φ is below the reject threshold."""
-        _require_finite_phi(phi)
-        return phi < self.threshold
+    def is_woody(self, score: float, conditions: FilletConditions = TIDY) -> bool:
+        """True when the score is strictly below the reject cut for these conditions."""
+        _require_finite_score(score)
+        return score < self.threshold.at(conditions)
 
-    def grade(self, phi: float) -> str | None:
-        """Three-way grade of Φ, or None without grade thresholds."""
-        _require_finite_phi(phi)
+    def grade(self, score: float, conditions: FilletConditions = TIDY) -> str | None:
+        """Three-way grade of the score, or None without grade cuts."""
+        _require_finite_score(score)
         if self.severe_threshold is None:
             return None
-        if phi < self.severe_threshold:
+        if score < self.severe_threshold.at(conditions):
             return GRADE_SEVERE
-        if phi < self.grade_moderate_threshold:
+        if score < self.grade_moderate_threshold.at(conditions):
             return GRADE_MODERATE
         return GRADE_NORMAL
 
-    def classify(self, phi: float) -> Classification:
-        """Binary label and optional grade of a shape score."""
-        return Classification(label=LABEL_WOODY if self.is_woody(phi) else LABEL_NORMAL, grade=self.grade(phi))
+    def classify(self, score: float, conditions: FilletConditions = TIDY) -> Classification:
+        """Reject label, optional grade and the reject cut applied."""
+        return Classification(label=LABEL_WOODY if self.is_woody(score, conditions) else LABEL_NORMAL,
+                              grade=self.grade(score, conditions), threshold=self.threshold.at(conditions))
 
 
 def _require_positive_finite(name: str, value: float) -> None:
@@ -90,6 +157,6 @@ def _require_positive_finite(name: str, value: float) -> None:
         raise ValueError(f"{name} must be a finite number > 0, got {value}")
 
 
-def _require_finite_phi(phi: float) -> None:
-    if not math.isfinite(phi):
-        raise ValueError(f"phi must be finite, got {phi}: unscored fillets cannot be classified")
+def _require_finite_score(score: float) -> None:
+    if not math.isfinite(score):
+        raise ValueError(f"the score must be finite, got {score}: unscored fillets cannot be classified")

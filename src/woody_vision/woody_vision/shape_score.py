@@ -35,6 +35,27 @@ Clipping every frame at the locked rigid front leaves anything that only
 appears ahead of the body out of the score; only bending pulls the visible
 body back inside the span.
 
+The line score. Φ is a maximum over frames, and a compliant fillet's Φ_t climbs
+5–7 per 30 Hz frame over the last frames of the window, so where the closing
+frame happens to fall on that ramp (the line speed, which end leads, a turn)
+moves a normal fillet's Φ a lot. The line therefore grades on ``line_phi``:
+Φ_t interpolated at the moment the rigid overhang (trailing edge + L − edge)
+is ``line_fraction`` × L, a physically equivalent moment for every fillet,
+found between the two frames around it. The evaluator keeps scoring past the
+centroid crossing until that moment is passed (a fillet sent blunt end first
+has its centroid ahead of mid-body, so its window closes earlier). It also
+reports what the decision may depend on, all measured on the reference
+outline and the approach: the fillet's speed in the image and which end
+leads (:func:`leading_end`).
+
+Crowded lanes. A window frame whose outline suddenly grows (area or width
+beyond ``MERGE_GROWTH`` × the reference's) or whose trailing edge jumps back
+is a blob merged with a neighbour (a follower touching the fillet as it tips,
+a fillet side by side in the next lane): it is rejected, never scored, and
+counted. If the frames left around the measuring point are too far apart,
+the fillet is unscored with the reason. The reference is likewise the latest
+flat outline not grown beyond ``MERGE_GROWTH`` × the median flat area.
+
 A result is produced exactly once per evaluator: 'scored' when the window
 closes, otherwise 'unscored' with a reason (no reference because the track
 started at or past the edge, or the track ended before the window closed).
@@ -64,6 +85,19 @@ REASON_LOST_BEFORE_EDGE = "track ended before its body reached the roller edge"
 REASON_LOST_IN_WINDOW = "track ended before the evaluation window closed"
 REASON_DEGENERATE = "degenerate reference contour"
 REASON_LATE_CLOSE = "frames lost at the roller edge: the window closed {:.0f} px past the fillet's centroid"
+REASON_LINE_GAP = ("no clean frames around the measuring point (overhang {:.2f} L): frames lost or merged with a "
+                   "neighbour ({} rejected)")
+LINE_OVERHANG_FRACTION = 0.5
+"""The line score is Φ_t where the rigid overhang is this fraction of the body length L (before a narrow-first
+fillet's centroid crosses the edge, about at a blunt-first one's)."""
+MERGE_GROWTH = 1.25
+"""A window frame whose outline area or width exceeds the reference's by this factor is a merged blob."""
+TRAILING_JUMP_PX = 3
+"""A window frame whose trailing edge lies this far behind the previous frame's belongs to a merged follower."""
+LEADING_NARROW = "narrow"
+LEADING_BLUNT = "blunt"
+FLAT_HISTORY = 8
+"""Flat outlines kept to choose an unmerged reference from."""
 LATE_CLOSE_FRAMES = 2.5
 """How far (in frames of the fillet's approach speed) the closing frame may lie past the centroid crossing.
 With every frame it is under one frame; a lost frame or two stays within this."""
@@ -174,6 +208,8 @@ class FrameScore:
     phi: float
     hu_term: float
     solidity_term: float
+    overhang: float = math.nan
+    """Rigid overhang (trailing edge + L − edge) as a fraction of the body length L."""
 
 
 @dataclass(frozen=True)
@@ -203,6 +239,49 @@ class ShapeResult:
     """Stamp of the reference frame (the last flat frame before the leading edge reached the roller edge)."""
     trace: tuple[FrameScore, ...] = ()
     """Every scored frame of the window, in order."""
+    line_phi: float = math.nan
+    """Φ_t at the overhang ``line_fraction`` × L, interpolated between the frames around it: the line's score."""
+    line_fraction: float = LINE_OVERHANG_FRACTION
+    leading_end: str = ""
+    """'narrow' or 'blunt': which end of the reference outline leads (:func:`leading_end`)."""
+    speed_px_s: float = math.nan
+    """The fillet's speed along the image rows while flat (px/s)."""
+    rejected_frames: int = 0
+    """Window frames rejected as merged with a neighbour."""
+    reference_contour: np.ndarray | None = None
+    """The flat outline the reference was made from (for overlays)."""
+    line_contour: np.ndarray | None = None
+    """The outline of the frame nearest the measuring point (for overlays)."""
+    extra_trace: tuple[FrameScore, ...] = ()
+    """Frames scored after the window closed, up to the measuring point."""
+    window_closed: bool = False
+    """Whether the paper's window closed cleanly, so that ``phi`` is the paper's Φ."""
+
+
+def leading_end(contour: np.ndarray) -> str:
+    """'blunt' when the leading quarter of the outline (max v) is wider on average than the trailing quarter.
+
+    A fillet's narrow (tapered) end is the one with less surface; measured on
+    the flat reference outline, the comparison holds for turned fillets too.
+    """
+    mask, _, _ = fill_rows(contour)
+    widths = np.count_nonzero(mask, axis=1)
+    quarter = max(1, len(widths) // 4)
+    return LEADING_BLUNT if widths[-quarter:].mean() > widths[:quarter].mean() else LEADING_NARROW
+
+
+def interpolate_at(frames: list[FrameScore], fraction: float) -> tuple[float, int | None]:
+    """Φ_t at the overhang ``fraction`` between the two frames around it, and the index of the nearer one.
+
+    (NaN, None) when no two consecutive frames bracket it.
+    """
+    for i in range(1, len(frames)):
+        before, after = frames[i - 1], frames[i]
+        if before.overhang <= fraction <= after.overhang and after.overhang > before.overhang:
+            weight = (fraction - before.overhang) / (after.overhang - before.overhang)
+            nearer = i if weight >= 0.5 else i - 1
+            return before.phi + weight * (after.phi - before.phi), nearer
+    return math.nan, None
 
 
 class _Phase(Enum):
@@ -221,21 +300,34 @@ class ShapeEvaluator:
         w2: float = W2,
         tip_ratio: float = TIP_WIDTH_RATIO,
         reference_margin_px: float = DEFAULT_REFERENCE_MARGIN_PX,
+        line_fraction: float = LINE_OVERHANG_FRACTION,
     ) -> None:
         if not 0.0 < tip_ratio < 1.0:
             raise ValueError(f"tip_ratio must be in (0, 1), got {tip_ratio}")
         if reference_margin_px < 0.0:
             raise ValueError(f"reference_margin_px must be >= 0, got {reference_margin_px}")
+        if not 0.1 <= line_fraction <= 0.9:
+            raise ValueError(f"line_fraction must be in [0.1, 0.9], got {line_fraction}")
         self.edge_row = float(edge_row)
         self.w1 = float(w1)
         self.w2 = float(w2)
         self.tip_ratio = float(tip_ratio)
         self.reference_margin_px = float(reference_margin_px)
+        self.line_fraction = float(line_fraction)
         self._phase = _Phase.APPROACHING
-        self._last_flat: np.ndarray | None = None
-        self._last_flat_stamp: float | None = None
+        self._flat: list[tuple[np.ndarray, float, float]] = []
+        """(contour, stamp, area) of the latest flat frames."""
         self._reference: ShapeReference | None = None
+        self._reference_contour: np.ndarray | None = None
+        self._reference_stamp: float | None = None
+        self._reference_area = math.nan
+        self._reference_width = math.nan
         self._trace: list[FrameScore] = []
+        self._extra: list[FrameScore] = []
+        self._contours: list[np.ndarray] = []
+        self._closed = False
+        self._last_trailing: int | None = None
+        self._rejected = 0
         self._last_stamp: float | None = None
         self._sightings = 0
         self._approach: list[tuple[float, float]] = []
@@ -265,27 +357,68 @@ class ShapeEvaluator:
         points = np.asarray(contour, dtype=np.int32).reshape(-1, 2)
         if self._phase is _Phase.APPROACHING:
             if float(points[:, 1].max()) < self.edge_row - self.reference_margin_px:
-                self._last_flat, self._last_flat_stamp = points, stamp
-                self._approach.append((stamp, float(points[:, 1].max())))
+                self._remember_flat(points, stamp)
                 return None
-            if self._last_flat is None:
+            if not self._flat:
                 return self._finish(STATUS_UNSCORED, REASON_STARTED_PAST_EDGE)
-            self._reference = make_reference(self._last_flat, self.tip_ratio)
-            self._last_flat = None
-            if self._reference is None:
+            if not self._lock_reference():
                 return self._finish(STATUS_UNSCORED, REASON_DEGENERATE)
             self._phase = _Phase.REFERENCED
+        return self._window_frame(points, stamp)
+
+    def _remember_flat(self, points: np.ndarray, stamp: float) -> None:
+        self._flat = (self._flat + [(points, stamp, cv2.contourArea(points))])[-FLAT_HISTORY:]
+        self._approach.append((stamp, float(points[:, 1].max())))
+
+    def _lock_reference(self) -> bool:
+        """The reference from the latest flat outline not grown by a merge; False if it is degenerate."""
+        typical = float(np.median([area for _, _, area in self._flat]))
+        clean = [f for f in self._flat if f[2] <= MERGE_GROWTH * typical]
+        points, self._reference_stamp, self._reference_area = (clean or self._flat)[-1]
+        self._reference = make_reference(points, self.tip_ratio)
+        self._reference_contour = points
+        self._reference_width = float(np.ptp(points[:, 0]) + 1)
+        self._flat = []
+        return self._reference is not None
+
+    def _window_frame(self, points: np.ndarray, stamp: float) -> ShapeResult | None:
         reference = self._reference
         trailing = int(points[:, 1].min())
         if trailing + reference.length_px < self.edge_row:
             return None  # the rigid body front has not reached the edge yet: the window is not open
-        self._score(clip_body(points, trailing, reference.length_px), stamp)
-        overshoot = trailing + reference.centroid_offset_px - self.edge_row
-        if overshoot >= 0.0:
-            if overshoot > LATE_CLOSE_FRAMES * self._advance_per_frame():
+        if self._merged(points, trailing):
+            self._rejected += 1
+            return None
+        self._last_trailing = trailing
+        overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
+        frame = self._score(clip_body(points, trailing, reference.length_px), stamp, overhang)
+        (self._extra if self._closed else self._trace).append(frame)
+        self._contours.append(points)
+        if not self._closed:
+            overshoot = trailing + reference.centroid_offset_px - self.edge_row
+            if overshoot >= 0.0 and overshoot > LATE_CLOSE_FRAMES * self._advance_per_frame():
                 return self._finish(STATUS_UNSCORED, REASON_LATE_CLOSE.format(overshoot))
-            return self._finish(STATUS_SCORED, "")
+            self._closed = overshoot >= 0.0
+        if self._closed and overhang >= self.line_fraction:
+            return self._finish_line()
         return None
+
+    def _merged(self, points: np.ndarray, trailing: int) -> bool:
+        """Whether this window frame's blob has grown into a neighbour's (see the module doc)."""
+        if self._last_trailing is not None and trailing < self._last_trailing - TRAILING_JUMP_PX:
+            return True
+        width = float(np.ptp(points[:, 0]) + 1)
+        return (cv2.contourArea(points) > MERGE_GROWTH * self._reference_area
+                or width > MERGE_GROWTH * self._reference_width)
+
+    def _finish_line(self) -> ShapeResult:
+        frames = self._trace + self._extra
+        line_phi, nearer = interpolate_at(frames, self.line_fraction)
+        step = self._advance_per_frame() / self._reference.length_px
+        if nearer is None or not math.isfinite(line_phi) or _bracket_gap(frames, self.line_fraction) > (
+                LATE_CLOSE_FRAMES * step):
+            return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
+        return self._finish(STATUS_SCORED, "", line_phi, self._contours[nearer])
 
     def _advance_per_frame(self) -> float:
         """Rows the fillet moved per camera frame while flat (inf when too few frames tell)."""
@@ -296,25 +429,35 @@ class ShapeEvaluator:
         steps = steps[steps > 0]
         if not steps.size or stamps[-1] <= stamps[0]:
             return math.inf
-        return float((rows[-1] - rows[0]) / (stamps[-1] - stamps[0]) * steps.min())
+        return float(self._speed_px_s() * steps.min())
+
+    def _speed_px_s(self) -> float:
+        """The fillet's speed along the image rows while flat (NaN when too few frames tell)."""
+        if len(self._approach) < 2:
+            return math.nan
+        (t0, r0), (t1, r1) = self._approach[0], self._approach[-1]
+        return (r1 - r0) / (t1 - t0) if t1 > t0 else math.nan
 
     def finish(self) -> ShapeResult | None:
         """The track ended: the unscored result, or None if a result was already produced."""
         if self._phase is _Phase.DONE:
             return None
+        if self._closed:
+            return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
         reason = REASON_LOST_IN_WINDOW if self._trace else REASON_LOST_BEFORE_EDGE
         return self._finish(STATUS_UNSCORED, reason)
 
-    def _score(self, body: np.ndarray, stamp: float) -> None:
+    def _score(self, body: np.ndarray, stamp: float, overhang: float) -> FrameScore:
         if len(body) >= 3 and cv2.contourArea(body) > 0.0:
             hu_term, solidity_term = shape_terms(self._reference, body)
         else:  # a degenerate contour (no area) has no shape to compare: the frame counts, its terms are NaN
             hu_term, solidity_term = math.nan, math.nan
-        phi = self.w1 * hu_term + self.w2 * solidity_term
-        self._trace.append(FrameScore(stamp, phi, hu_term, solidity_term))
+        return FrameScore(stamp, self.w1 * hu_term + self.w2 * solidity_term, hu_term, solidity_term, overhang)
 
-    def _finish(self, status: str, reason: str) -> ShapeResult:
+    def _finish(self, status: str, reason: str, line_phi: float = math.nan,
+                line_contour: np.ndarray | None = None) -> ShapeResult:
         self._phase = _Phase.DONE
+        referenced = self._reference is not None
         return ShapeResult(
             status=status,
             reason=reason,
@@ -323,10 +466,27 @@ class ShapeEvaluator:
             solidity_term=_nanmax([f.solidity_term for f in self._trace]),
             frames=len(self._trace),
             stamp=self._last_stamp,
-            aspect_ratio=self._reference.aspect_ratio if self._reference is not None else math.nan,
-            reference_stamp=self._last_flat_stamp if self._reference is not None else None,
+            aspect_ratio=self._reference.aspect_ratio if referenced else math.nan,
+            reference_stamp=self._reference_stamp if referenced else None,
             trace=tuple(self._trace),
+            line_phi=line_phi,
+            line_fraction=self.line_fraction,
+            leading_end=leading_end(self._reference_contour) if referenced else "",
+            speed_px_s=self._speed_px_s(),
+            rejected_frames=self._rejected,
+            reference_contour=self._reference_contour,
+            line_contour=line_contour,
+            extra_trace=tuple(self._extra),
+            window_closed=self._closed,
         )
+
+
+def _bracket_gap(frames: list[FrameScore], fraction: float) -> float:
+    """Overhang between the two frames around ``fraction`` (inf when none bracket it)."""
+    for before, after in zip(frames, frames[1:]):
+        if before.overhang <= fraction <= after.overhang:
+            return after.overhang - before.overhang
+    return math.inf
 
 
 def _nanmax(values: list[float]) -> float:
