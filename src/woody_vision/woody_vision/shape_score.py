@@ -368,6 +368,7 @@ class ShapeEvaluator:
 
     def _remember_flat(self, points: np.ndarray, stamp: float) -> None:
         self._flat = (self._flat + [(points, stamp, cv2.contourArea(points))])[-FLAT_HISTORY:]
+        self._last_trailing = int(points[:, 1].min())
         self._approach.append((stamp, float(points[:, 1].max())))
 
     def _lock_reference(self) -> bool:
@@ -384,12 +385,12 @@ class ShapeEvaluator:
     def _window_frame(self, points: np.ndarray, stamp: float) -> ShapeResult | None:
         reference = self._reference
         trailing = int(points[:, 1].min())
-        if trailing + reference.length_px < self.edge_row:
-            return None  # the rigid body front has not reached the edge yet: the window is not open
         if self._merged(points, trailing):
             self._rejected += 1
             return None
         self._last_trailing = trailing
+        if trailing + reference.length_px < self.edge_row:
+            return None  # the rigid body front has not reached the edge yet: the window is not open
         overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
         frame = self._score(clip_body(points, trailing, reference.length_px), stamp, overhang)
         (self._extra if self._closed else self._trace).append(frame)
