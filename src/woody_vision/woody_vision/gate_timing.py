@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -22,9 +23,14 @@ class GateTiming:
         if self.open_duration_s <= 0:
             raise ValueError(f"open duration must be > 0 s, got {self.open_duration_s}")
 
-    def actuation_time(self, lane: int, edge_crossing_time: float) -> float:
-        """Sim time to open the gate so it is open while the fillet's centre passes."""
+    def actuation_time(self, lane: int, edge_crossing_time: float, speed_mps: float = math.nan) -> float:
+        """Sim time to open the gate so it is open while the fillet's centre passes.
+
+        ``speed_mps`` is the fillet's measured speed; without a plausible one
+        (finite, within a factor 2 of the line speed) the line speed is used.
+        """
         if not 0 <= lane < len(self.gate_distances_m):
             raise ValueError(f"lane {lane} has no diverter (lanes 0..{len(self.gate_distances_m) - 1})")
-        travel = self.gate_distances_m[lane] / self.line_speed_mps
+        plausible = math.isfinite(speed_mps) and 0.5 <= speed_mps / self.line_speed_mps <= 2.0
+        travel = self.gate_distances_m[lane] / (speed_mps if plausible else self.line_speed_mps)
         return edge_crossing_time + travel - self.open_duration_s / 2.0

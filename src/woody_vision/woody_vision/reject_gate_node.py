@@ -2,9 +2,14 @@
 
 Copy it for your own line. A verdict is stamped with the sim time at which the
 fillet's body centre crossed the roller edge; the fillet then reaches its
-lane's diverter ``gate_distance_m`` further on at line speed, so the gate opens
-at ``stamp + distance / speed - open_duration / 2``. A verdict that arrives
-after that moment is late: it is logged and counted, never acted on.
+lane's diverter ``gate_distance_m`` further on at the speed the top camera
+measured for it (the verdict's ``speed``; the line speed parameter when the
+verdict has none), so the gate opens at
+``stamp + distance / speed - open_duration / 2``, and a line whose speed
+changes keeps its timing. A verdict that arrives after that moment is late:
+it is logged and counted, never acted on. Unscored fillets are diverted by
+default (``divert_unscored``): on a crowded or messy line a fillet that could
+not be measured cleanly may be woody.
 """
 
 from __future__ import annotations
@@ -15,7 +20,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from woody_common import topics
-from woody_common.line import FPM_TO_MPS, LANES, SPEED_RANGE_FPM
+from woody_common.line import LANES, SPEED_RANGE_FPM, fpm_to_mps
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletVerdict, GateCommand
@@ -33,13 +38,13 @@ class RejectGate(Node):
         distances = list(declare(self, "gate_distance_m", [0.6], "Distance from the roller edge to each lane's "
                                  "diverter (m): one value for all lanes or one per lane."))
         open_duration = declare(self, "open_duration_s", 0.3, "How long a diverter stays open (s).", 0.01, 5.0)
-        declare(self, "divert_unscored", False, "Also divert fillets that could not be scored (fail safe).")
+        self.divert_unscored = declare(self, "divert_unscored", True, "Also divert fillets that could not be "
+                                       "scored (fail safe: one that could not be measured may be woody).")
         if len(distances) not in (1, lanes):
             raise ValueError(f"gate_distance_m needs 1 or {lanes} values, got {len(distances)}")
-        self.timing = GateTiming(line_speed_mps=speed_fpm * FPM_TO_MPS,
+        self.timing = GateTiming(line_speed_mps=fpm_to_mps(speed_fpm),
                                  gate_distances_m=distances if len(distances) == lanes else distances * lanes,
                                  open_duration_s=open_duration)
-        self.divert_unscored = bool(self.get_parameter("divert_unscored").value)
         self.diverted = 0
         self.late = 0
         self.passed = 0
@@ -59,7 +64,7 @@ class RejectGate(Node):
         now = self.get_clock().now().nanoseconds * 1e-9
         crossing = stamp_to_seconds(verdict.header.stamp)
         try:
-            actuation = self.timing.actuation_time(verdict.lane, crossing)
+            actuation = self.timing.actuation_time(verdict.lane, crossing, verdict.speed)
         except ValueError as exc:
             self.get_logger().error(f"verdict for fillet {verdict.fillet_id}: {exc}; not acted on")
             return
@@ -75,8 +80,9 @@ class RejectGate(Node):
         command.header.frame_id = verdict.header.frame_id
         self.publisher.publish(command)
         self.diverted += 1
+        why = verdict.unscored_reason if unscored else f"score {verdict.score:.2f} < {verdict.threshold:.2f}"
         self.get_logger().info(f"divert fillet {verdict.fillet_id} lane {verdict.lane} at {actuation:.3f} s "
-                               f"(phi {verdict.phi:.2f}); {self.diverted} diverted")
+                               f"({why}); {self.diverted} diverted")
 
 
 def main(args: list[str] | None = None) -> None:
