@@ -1,8 +1,9 @@
 # The README's two commands: `make demo` and `make test`. Each sets itself up on first use.
+# `make test-unit`: the tests that start no ROS graph or node process and run no long experiment, in under 2 minutes.
 VENV ?= .venv
 PYTEST_ARGS ?=
 
-.PHONY: setup demo lint test bench clean
+.PHONY: setup demo lint test test-unit bench clean
 
 setup:
 	@scripts/setup.sh $(VENV)
@@ -15,6 +16,9 @@ lint: setup
 
 test: setup lint
 	$(VENV)/bin/python -m pytest tests $(PYTEST_ARGS)
+
+test-unit: setup lint
+	$(VENV)/bin/python -m pytest tests -m "not ros and not slow" $(PYTEST_ARGS)
 
 bench: setup
 	$(VENV)/bin/woody bench sim

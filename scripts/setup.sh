@@ -64,11 +64,17 @@ if ! is_current woody_msgs "$msgs"; then
 fi
 
 # 5. The Python packages, editable so source edits take effect at once.
-py=$(digest "$ROOT"/src/woody_common/setup.py "$ROOT"/src/woody_sim/setup.py "$ROOT"/src/woody_vision/setup.py "$ROOT"/src/woody_tools/setup.py)
+PY_PACKAGES=(woody_common woody_sim woody_vision woody_bag woody_experiments woody_tools)
+setups=() editables=()
+for package in "${PY_PACKAGES[@]}"; do
+  setups+=("$ROOT/src/$package/setup.py")
+  editables+=(-e "$ROOT/src/$package")
+done
+py=$(digest "${setups[@]}")
 if ! is_current python_packages "$py$ROOT"; then
-  log "installing woody_common, woody_sim, woody_vision, woody_tools (editable)"
-  "${PIP[@]}" install --no-deps --no-build-isolation -e "$ROOT/src/woody_common" -e "$ROOT/src/woody_sim" -e "$ROOT/src/woody_vision" \
-    -e "$ROOT/src/woody_tools" > "$STAMPS/pip-editable.log" 2>&1 || { cat "$STAMPS/pip-editable.log" >&2; exit 1; }
+  log "installing ${PY_PACKAGES[*]} (editable)"
+  "${PIP[@]}" install --no-deps --no-build-isolation "${editables[@]}" \
+    > "$STAMPS/pip-editable.log" 2>&1 || { cat "$STAMPS/pip-editable.log" >&2; exit 1; }
   mark python_packages "$py$ROOT"
 fi
 

@@ -1,4 +1,9 @@
-"""Shared fixtures: a private ROS domain per test and an rclpy context on it."""
+"""Shared fixtures: a private ROS domain per test and an rclpy context on it; the ``ros`` marker.
+
+A test that uses a ROS domain (``ros_domain``, ``ros_node``, ``spawn_helper``) is marked ``ros``
+here; modules that start entry points by other ways mark themselves (``pytestmark``).
+`make test-unit` runs ``pytest -m "not ros"``.
+"""
 
 from __future__ import annotations
 
@@ -13,6 +18,14 @@ REPO = Path(__file__).resolve().parents[1]
 TESTS = REPO / "tests"
 FIXTURES = TESTS / "fixtures"
 """Helper processes the graph tests start (publishers, a replay wrapper)."""
+ROS_FIXTURES = {"ros_domain", "ros_node", "spawn_helper"}
+"""Fixtures that put a test on a ROS graph: their tests get the ``ros`` marker."""
+
+
+def pytest_collection_modifyitems(items) -> None:
+    for item in items:
+        if ROS_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.ros)
 
 
 def fixture_env(domain_id: int) -> dict[str, str]:

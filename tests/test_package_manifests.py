@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
-PACKAGES = ["woody_common", "woody_sim", "woody_vision", "woody_tools"]
+PACKAGES = ["woody_common", "woody_sim", "woody_vision", "woody_bag", "woody_experiments", "woody_tools"]
 
 
 def ros_imports(package: str) -> set[str]:

@@ -14,12 +14,11 @@ setup(
     zip_safe=True,
     maintainer="woody developers",
     maintainer_email="woody@example.org",
-    description="The woody command: runs, recording, replay, reports, sweeps and benchmarks.",
+    description="The woody command: one module per verb, node process management and the benchmarks.",
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
             "woody = woody_tools.cli:main",
-            "recorder = woody_tools.recorder_node:main",
         ],
     },
 )

@@ -7,19 +7,19 @@ import importlib
 import sys
 
 SUBCOMMANDS = [
-    ("run", "line_run", "run a multi-lane line: sim + vision + gate + recorder; bag, verdicts.csv, report.md"),
+    ("run", "run", "run a multi-lane line: sim + vision + gate + recorder; bag, verdicts.csv, report.md"),
     ("replay", "replay", "republish a recorded bag with its original timing and /clock"),
     ("report", "report", "rebuild report.md and plots from a bag or a verdicts.csv"),
-    ("bag", "bag_command", "`woody bag info BAG`, `woody bag recover IN OUT` (rescue a recording cut short)"),
-    ("bench", "benchmarks.command", "benchmarks: `woody bench sim`, `woody bench vision`, `woody bench graph`"),
+    ("bag", "bag", "`woody bag info BAG`, `woody bag recover IN OUT` (rescue a recording cut short)"),
+    ("bench", "bench", "benchmarks: `woody bench sim`, `woody bench vision`, `woody bench graph`"),
     ("sweep", "sweep", "the paper's drop-test grid (meshes x k x speed), parallel and resumable; runs.csv, results.md"),
-    ("meshes", "meshes_command",
+    ("meshes", "meshes",
      "mesh sets: `woody meshes stats SPEC...` prints shape descriptors per mesh and per set"),
     ("calibrate", "calibrate", "fit M, c and the drive friction to the paper's side view, choose the Φ threshold; "
                                "writes config/calibration.yaml"),
     ("soak", "soak", "physics soak: N fillet passages over the roller across k, mass, speed and lanes; blow-ups"),
 ]
-"""(subcommand, module in woody_tools with add_arguments(parser) and run(args) -> int, help)."""
+"""(subcommand, module in woody_tools.commands with add_arguments(parser) and run(args) -> int, help)."""
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
@@ -30,7 +30,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     for name, module_name, help_text in SUBCOMMANDS:
         command = sub.add_parser(name, help=help_text)
         if only is None or only == name:
-            module = importlib.import_module(f"woody_tools.{module_name}")
+            module = importlib.import_module(f"woody_tools.commands.{module_name}")
             module.add_arguments(command)
             command.set_defaults(func=module.run)
     return parser

@@ -1,9 +1,10 @@
-"""`woody run`: the whole line as separate processes on a private ROS domain.
+"""The processes of `woody run`: the whole line as separate processes on a private ROS domain.
 
 Starts recorder, segmenter, grader, reject_gate and line_sim, watches ground
 truth, verdicts and /clock from this process to show progress, stops
 everything when every fillet is graded (or on Ctrl-C, or when a node dies),
-and leaves the bag, verdicts.csv and report.md in the output folder.
+and leaves the bag, verdicts.csv and report.md in the output folder. The
+options are :mod:`woody_tools.commands.run`'s.
 """
 
 from __future__ import annotations
@@ -11,9 +12,7 @@ from __future__ import annotations
 import argparse
 import fcntl
 import json
-import math
 import os
-import re
 import signal
 import sys
 import time
@@ -21,75 +20,20 @@ from datetime import datetime
 from pathlib import Path
 
 from woody_common import topics
-from woody_common.calibration import DEFAULT_PATH as CALIBRATION_PATH
-from woody_common.line import MAX_SIDE_RATE_HZ, MAX_SPAWN_DURATION_S, SPEED_RANGE_FPM
 from woody_common.stamps import stamp_to_seconds
-from woody_sim.line_geometry import TOP_CAMERA_PRESETS, LineGeometry, top_camera_preset
-from woody_sim.sensor_model import PRESETS
-from woody_tools import arguments
+from woody_experiments.messages import spawn_from_msg, verdict_from_msg
+from woody_experiments.run_report import Spawn, Verdict, build_report, join, verdict_table, write_csv
+from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_tools.cpu_usage import CpuAccounting
 from woody_tools.processes import DomainInUse, NodeProcess, lease_domain
-from woody_tools.run_report import Spawn, Verdict, build_report, join, verdict_table, write_csv
 from woody_vision.segmentation import REAL_CAMERA_FILTERS
 
 MAX_LEAD_S = 0.1
 """line_sim runs at most this far (sim s, 3 top frames) ahead of the segmenter, whose queue holds 5 frames."""
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--lanes", type=int, default=3, help="lanes across the belt, 1-6 (default 3)")
-    parser.add_argument("--speed-fpm", type=float, default=100.0, help="line speed in feet per minute (default 100)")
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument("--fillets", type=int, default=None, help="total fillets to spawn (default 12)")
-    group.add_argument("--duration", type=float, default=None, help="sim seconds of spawning instead of a count")
-    parser.add_argument("--k", type=float, nargs="+", default=[0.0, 100.0],
-                        help="stiffness values to mix, N*m/rad (default: 0 normal, 100 woody)")
-    parser.add_argument("--meshes", default="builtin",
-                        help="builtin, generated:N[:SEED], a folder of meshes; comma-combinable (default builtin)")
-    parser.add_argument("--seed", type=int, default=7, help="seed of the fillet mix (default 7)")
-    parser.add_argument("--out", default=None, help="output folder (default bags/run-<time>)")
-    parser.add_argument("--realtime", action="store_true", help="pace the simulation to the wall clock")
-    parser.add_argument("--threshold", type=float, default=None, help="Φ threshold of the grader (default: its own)")
-    parser.add_argument("--side-rate", type=float, default=60.0, help="side camera frame rate, Hz (default 60)")
-    parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
-                        help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
-                             "86.6 deg, 0.33 m)")
-    arguments.add_yaw_sd(parser, "line_sim's yaw_sd_deg")
-    parser.add_argument("--calibration", default=str(CALIBRATION_PATH),
-                        help="calibration file given to line_sim and the grader as a ROS params file "
-                             "(default config/calibration.yaml)")
-    parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
-    parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
-                        help="top camera error model (docs/sensors.md); default ideal")
-    parser.add_argument("--namespace", default="", metavar="NS",
-                        help="run the line under NS (topics NS/..., sim clock NS/clock), so several lines share a "
-                             "ROS domain; default: the root namespace")
-    parser.add_argument("--force", action="store_true", help="overwrite a run already in --out")
-    parser.add_argument("--share-domain", action="store_true",
-                        help="run on an exported ROS_DOMAIN_ID even when another woody run holds it (they mix)")
-
-
 class RunRefused(Exception):
     """An input `woody run` cannot work with; the message is one line (printed, exit code 2)."""
-
-
-def _validate(args: argparse.Namespace) -> None:
-    low, high = SPEED_RANGE_FPM
-    if not 1 <= args.lanes <= 6:
-        raise RunRefused(f"--lanes must be 1..6, got {args.lanes}")
-    if not low <= args.speed_fpm <= high:
-        raise RunRefused(f"--speed-fpm must be in [{low:g}, {high:g}], got {args.speed_fpm}")
-    if args.fillets is not None and args.fillets < 1:
-        raise RunRefused(f"--fillets must be >= 1, got {args.fillets}")
-    if args.duration is not None and not 0.0 < args.duration <= MAX_SPAWN_DURATION_S:
-        raise RunRefused(f"--duration must be in (0, {MAX_SPAWN_DURATION_S:g}] sim seconds, got {args.duration:g}")
-    if not 0.0 <= args.side_rate <= MAX_SIDE_RATE_HZ:
-        raise RunRefused(f"--side-rate must be in [0, {MAX_SIDE_RATE_HZ:g}] Hz (0: no side camera), "
-                         f"got {args.side_rate:g}")
-    if not all(0 <= k < math.inf for k in args.k):
-        raise RunRefused(f"--k values must be finite and >= 0, got {' '.join(f'{k:g}' for k in args.k)}")
-    if args.namespace and not re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", args.namespace):
-        raise RunRefused(f"--namespace must be a ROS name like /line2, got '{args.namespace}'")
 
 
 def _claim_out(out: Path, force: bool):
@@ -201,21 +145,6 @@ class LineMonitor:
         rclpy.try_shutdown(context=self.context)
 
 
-def spawn_from_msg(msg) -> Spawn:
-    """Flatten a woody_msgs/FilletSpawn (the line's ground truth) into the report's Spawn."""
-    return Spawn(sim_id=msg.fillet_id, lane=msg.lane, mesh=msg.mesh, k=msg.stiffness, mass=msg.mass,
-                 line_speed=msg.line_speed, stamp=stamp_to_seconds(msg.header.stamp), spawn_x=msg.position.x)
-
-
-def verdict_from_msg(msg) -> Verdict:
-    """Flatten a woody_msgs/FilletVerdict into the report's Verdict."""
-    classes = {msg.CLASS_NORMAL: "normal", msg.CLASS_WOODY: "woody", msg.CLASS_UNSCORED: "unscored"}
-    return Verdict(fillet_id=msg.fillet_id, lane=msg.lane, stamp=stamp_to_seconds(msg.header.stamp),
-                   classification=classes.get(msg.classification, "unscored"), grade=msg.grade, phi=msg.phi,
-                   hu_term=msg.hu_term, solidity_term=msg.solidity_term, nmdm=msg.nmdm, mdm=msg.mdm, be=msg.be,
-                   reason=msg.unscored_reason, threshold=msg.threshold)
-
-
 def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, object]:
     """The run's settings as report.md's table shows them; the recorder keeps them in the bag (``woody.run``)."""
     return {"lanes": args.lanes, "line speed (FPM)": args.speed_fpm,
@@ -227,17 +156,9 @@ def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, obj
             "namespace": args.namespace or "/"}
 
 
-def run(args: argparse.Namespace) -> int:
-    try:
-        return _run_checked(args)
-    except RunRefused as exc:
-        print(f"woody run: {exc}", file=sys.stderr)
-        return 2
-
-
-def _run_checked(args: argparse.Namespace) -> int:
-    """Every input checked before anything is written: arguments, meshes, the domain, the output folder."""
-    _validate(args)
+def run_checked(args: argparse.Namespace) -> int:
+    """The line run of checked arguments; meshes, the domain and the output folder are checked before anything is
+    written (`RunRefused`)."""
     fillets = args.fillets if args.fillets is not None or args.duration is not None else 12
     out = Path(args.out) if args.out else Path("bags") / datetime.now().strftime("run-%Y%m%d-%H%M%S")
     mesh_notes = _check_meshes(args.meshes)

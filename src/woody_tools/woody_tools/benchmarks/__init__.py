@@ -1,4 +1,4 @@
-"""Every speed figure of the project in one place; `woody bench sim|vision|graph` runs them (:mod:`.command`).
+"""Every speed figure of the project in one place; `woody bench sim|vision|graph` runs them (:mod:`.suite`).
 
 - :mod:`.physics`: the physics alone (ms per step, real-time factor) with N fillets on the line;
 - :mod:`.rendering`: our renderer against pybullet's TinyRenderer (:mod:`.tiny_renderer`) on the same scene;

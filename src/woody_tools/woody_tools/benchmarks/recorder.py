@@ -21,8 +21,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 
+from woody_bag.summary import bag_summary
 from woody_tools.cpu_usage import cpu_seconds
-from woody_tools.mcap_io import bag_summary
 from woody_tools.processes import NodeProcess, lease_domain
 
 

@@ -1,0 +1,380 @@
+"""``recorder``: record topics of the running graph into one MCAP bag (see `woody_bag.writer`).
+
+Parameters (``--ros-args -p name:=value``):
+
+- ``output`` (string): path of the ``.mcap``; default ``bags/<YYYYmmdd-HHMMSS>.mcap``
+  under the working directory. An existing file is never overwritten.
+- ``topics`` (string array): topics to record; empty = every topic of the graph
+  whose type is importable, except those matching ``exclude_regex``.
+- ``topic_regex`` (string): also record topics matching this regular expression
+  (with ``topics`` given: the union of both).
+- ``exclude_regex`` (string): never record matching topics; default
+  ``/rosout``, ``/parameter_events`` and hidden (``/_...``) topics.
+- ``discovery_period`` (s, 0.5): how often the graph is searched for new topics
+  during the whole run.
+- ``queue_depth`` (100): keep-last depth of the subscriptions (per topic).
+- ``compression`` (``zstd``|``lz4``|``none``), ``compression_level`` (zstd
+  level, 1), ``chunk_size`` (bytes, 4 MiB), ``flush_period`` (s, 1.0: the
+  longest a message waits in memory before its chunk is written; what a
+  SIGKILL can lose), ``max_buffer_mb`` (512: received but unwritten data; a
+  full buffer holds the subscriptions back rather than grow).
+- ``run_settings`` (string): a JSON object of the recorded run's settings, kept in
+  the bag's ``woody`` metadata record (`woody report BAG` rebuilds its table from it).
+
+Unknown parameter names, malformed overrides and other arguments are refused
+with one line (exit code 2); ``--help`` prints this list.
+
+Timing: the MCAP ``log_time`` of a message is the **system (wall) clock at
+reception** (the middleware's reception timestamp, ns since the Unix epoch),
+whatever ``use_sim_time`` says; ``publish_time`` is the publisher's source
+timestamp (also wall clock). Replay paces messages by ``log_time``, so it
+reproduces what the live subscribers saw, including a simulator running
+slower or faster than real time; simulated time travels inside the bag as the
+recorded ``/clock`` messages and header stamps, which replay republishes
+unchanged, so ``use_sim_time`` nodes fed by a replay see the same sim times
+as the live run.
+
+QoS: each topic is subscribed the way its publishers offer it (rosbag2's
+adaptive rule): reliable unless some publisher is best-effort, transient-local
+(latched, e.g. ``/line/ground_truth``, ``/tf_static``) when every publisher is,
+keep-last ``queue_depth``. The offered profiles are stored in the channel's
+``offered_qos_profiles`` metadata.
+
+Per message, the subscription callback only queues the serialized bytes; a
+writer thread builds, compresses (zstd releases the GIL) and writes chunks, so
+compression and disk I/O use the second core. SIGINT/SIGTERM finish the file
+(summary and indexes) and log one line: messages, MB on disk (compressed), and per
+topic written/published (``/?`` when several publishers share it), naming what was
+lost in transport; exit code 0. A bad
+parameter or an unwritable output: one error line, exit code 2.
+"""
+
+from __future__ import annotations
+
+import collections
+import re
+import sys
+import threading
+import time
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from woody_bag.errors import BagError
+from woody_bag.qos import qos_profiles_yaml
+from woody_bag.schemas import message_class, message_definition
+from woody_bag.writer import BagWriter
+from woody_common.ros_params import check_overrides, run_node, usage
+
+DEFAULT_EXCLUDE = r"^/(rosout|parameter_events)$|/_"
+
+
+class ConfigError(ValueError):
+    """A parameter the recorder cannot work with; the message is one line."""
+
+
+class _Failure(Exception):
+    """The writer thread failed (e.g. disk full)."""
+
+
+class Recorder(Node):
+    """Subscribes raw to the selected topics and writes them into one MCAP bag."""
+
+    def __init__(self) -> None:
+        super().__init__("recorder")
+        self._declare()
+        check_overrides(self)  # before the bag is opened; run_node turns the ValueError into one line
+        p = self.get_parameter
+        output = p("output").value or f"bags/{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+        topics = self.get_parameter_or("topics", Parameter("topics", Parameter.Type.STRING_ARRAY, [])).value
+        self._topics = {t if t.startswith("/") else "/" + t for t in (topics or []) if t}
+        self._regex = self._compile("topic_regex", p("topic_regex").value)
+        self._exclude = self._compile("exclude_regex", p("exclude_regex").value)
+        self._depth = int(p("queue_depth").value)
+        discovery_period = float(p("discovery_period").value)
+        self._flush_period = float(p("flush_period").value)
+        self._max_buffer = int(p("max_buffer_mb").value) * 1024 * 1024
+        if discovery_period <= 0 or self._flush_period <= 0:
+            raise ConfigError("discovery_period and flush_period must be > 0")
+        if self._depth < 1 or self._max_buffer <= 0 or int(p("chunk_size").value) < 1:
+            raise ConfigError("queue_depth, max_buffer_mb and chunk_size must be >= 1")
+        run_info = {
+            "recorder": "woody_bag.recorder_node", "topics": sorted(self._topics),
+            "topic_regex": p("topic_regex").value, "exclude_regex": p("exclude_regex").value,
+            "use_sim_time": bool(p("use_sim_time").value), "start_unix_ns": time.time_ns(),
+            "log_time": "system (wall) clock at reception, ns since the Unix epoch",
+            "publish_time": "publisher's source timestamp (wall clock)",
+            "run_settings": p("run_settings").value,
+        }
+        try:
+            self._writer = BagWriter(output, chunk_size=int(p("chunk_size").value),
+                                     compression=p("compression").value,
+                                     compression_level=int(p("compression_level").value), metadata=run_info)
+        except BagError as exc:
+            raise ConfigError(str(exc)) from None
+        self.output = self._writer.path
+
+        self._cond = threading.Condition()
+        self._items: collections.deque = collections.deque()
+        self._buffered = 0
+        self._stopping = False
+        self._error: BaseException | None = None
+        self._subscriptions_by_topic: dict[str, object] = {}
+        self._offered: dict[str, int] = {}
+        self._seen: dict[str, list] = {}  # topic -> [first publication seq, last, received, most publishers]
+        self._ignored: set[str] = set()
+        self._start = time.monotonic()
+        self._thread = threading.Thread(target=self._write_loop, name="mcap-writer", daemon=True)
+        self._thread.start()
+        self._discover()
+        # Steady clock: with use_sim_time the graph's /clock may only start once we subscribe.
+        self.create_timer(discovery_period, self._discover, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(
+            f"recording to {self.output} ({'topics ' + ', '.join(sorted(self._topics)) if self._topics else ''}"
+            f"{' regex ' + self._regex.pattern if self._regex else ''}"
+            f"{'all topics' if not self._topics and not self._regex else ''}); log_time = wall clock at reception")
+
+    # ------------------------------------------------------------------ parameters
+    def _declare(self) -> None:
+        def desc(text: str, kind: int, **kw) -> ParameterDescriptor:
+            return ParameterDescriptor(description=text, type=kind, read_only=True, **kw)
+
+        S, D, INT, SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_DOUBLE,
+                       ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_STRING_ARRAY)
+        self.declare_parameter("output", "", desc("path of the .mcap (default bags/<timestamp>.mcap)", S))
+        self.declare_parameter("topics", Parameter.Type.STRING_ARRAY,
+                               desc("topics to record; empty = all importable topics", SA))
+        self.declare_parameter("topic_regex", "", desc("also record topics matching this regex", S))
+        self.declare_parameter("exclude_regex", DEFAULT_EXCLUDE, desc("never record topics matching this", S))
+        self.declare_parameter("discovery_period", 0.5, desc("seconds between searches for new topics", D))
+        self.declare_parameter("queue_depth", 100, desc("keep-last depth of each subscription", INT))
+        self.declare_parameter("compression", "zstd", desc("chunk compression: zstd, lz4 or none", S))
+        self.declare_parameter("compression_level", 1, desc("zstd level (1 keeps up with 200 Hz images)", INT))
+        self.declare_parameter("chunk_size", 4 * 1024 * 1024, desc("bytes per MCAP chunk", INT))
+        self.declare_parameter("flush_period", 1.0, desc("max seconds a message waits before its chunk is "
+                                                         "written (what a SIGKILL can lose)", D))
+        self.declare_parameter("max_buffer_mb", 512, desc("received but unwritten data held in memory", INT))
+        self.declare_parameter("run_settings", "", desc("JSON object of the recorded run's settings, kept in the "
+                                                        "bag's woody metadata record (woody report rebuilds its "
+                                                        "settings table from it)", S))
+
+    def _compile(self, name: str, pattern: str) -> re.Pattern | None:
+        if not pattern:
+            return None
+        try:
+            return re.compile(pattern)
+        except re.error as exc:
+            raise ConfigError(f"parameter {name}: invalid regular expression {pattern!r}: {exc}") from None
+
+    # ------------------------------------------------------------------ discovery
+    def _wanted(self, topic: str) -> bool:
+        if topic in self._topics:
+            return True
+        if self._regex is not None:
+            return bool(self._regex.search(topic)) and not (self._exclude and self._exclude.search(topic))
+        if self._topics:
+            return False
+        return not (self._exclude and self._exclude.search(topic))
+
+    def _discover(self) -> None:
+        if self._error is not None:
+            raise _Failure(str(self._error))
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._ignored or not self._wanted(topic):
+                continue
+            if topic in self._subscriptions_by_topic:
+                self._check_late_publishers(topic)
+                continue
+            if len(types) != 1:
+                self._ignore(topic, f"has several types {types}")
+                continue
+            try:
+                msg_type = message_class(types[0])
+                message_definition(types[0])
+            except LookupError as exc:
+                self._ignore(topic, str(exc))
+                continue
+            publishers = self.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue  # only subscribers so far: wait for a publisher to learn its QoS
+            self._subscribe(topic, types[0], msg_type, publishers)
+
+    def _ignore(self, topic: str, reason: str) -> None:
+        self._ignored.add(topic)
+        self.get_logger().warning(f"not recording {topic}: {reason}")
+
+    def _qos(self, publishers) -> QoSProfile:
+        reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
+        latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self._depth,
+                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+    def _subscribe(self, topic: str, type_name: str, msg_type: type, publishers) -> None:
+        qos = self._qos(publishers)
+        self._enqueue((topic, None, type_name, qos_profiles_yaml(p.qos_profile for p in publishers)), 0)
+        enqueue, time_ns = self._enqueue, time.time_ns
+        seen = self._seen[topic] = [None, 0, 0, len(publishers)]
+
+        def on_message(data: bytes, info: dict) -> None:
+            sequence = info.get("publication_sequence_number")
+            if sequence:
+                seen[0] = sequence if seen[0] is None else min(seen[0], sequence)
+                seen[1] = max(seen[1], sequence)
+            seen[2] += 1
+            enqueue((topic, data, info["received_timestamp"] or time_ns(), info["source_timestamp"]), len(data))
+
+        self._subscriptions_by_topic[topic] = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
+        self._offered[topic] = len(publishers)
+        self.get_logger().info(
+            f"recording {topic} [{type_name}] {qos.reliability.name.lower()} {qos.durability.name.lower()}")
+
+    def _check_late_publishers(self, topic: str) -> None:
+        count = self.count_publishers(topic)
+        if count <= self._offered.get(topic, 0):
+            self._offered[topic] = count
+            return
+        self._offered[topic] = count
+        self._seen[topic][3] = max(self._seen[topic][3], count)
+        sub_qos = self._subscriptions_by_topic[topic].qos_profile
+        for pub in self.get_publishers_info_by_topic(topic):
+            offered = pub.qos_profile
+            if ((sub_qos.reliability == ReliabilityPolicy.RELIABLE
+                 and offered.reliability != ReliabilityPolicy.RELIABLE)
+                    or (sub_qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                        and offered.durability != DurabilityPolicy.TRANSIENT_LOCAL)):
+                self.get_logger().warning(
+                    f"{topic}: new publisher {pub.node_name} offers {offered.reliability.name.lower()}/"
+                    f"{offered.durability.name.lower()}, incompatible with the recording subscription; "
+                    "its messages are not recorded")
+
+    # ------------------------------------------------------------------ writing
+    def _enqueue(self, item: tuple, size: int) -> None:
+        with self._cond:
+            while self._buffered > self._max_buffer and not self._stopping and self._error is None:
+                self._cond.wait(0.1)
+            self._buffered += size
+            self._items.append(item)
+            self._cond.notify()
+
+    def _write_loop(self) -> None:
+        writer = self._writer
+        last_flush = time.monotonic()
+        try:
+            while True:
+                with self._cond:
+                    if not self._items and not self._stopping:
+                        self._cond.wait(max(0.01, last_flush + self._flush_period - time.monotonic()))
+                    batch, self._items = self._items, collections.deque()
+                    stopping = self._stopping
+                size = 0
+                for topic, data, a, b in batch:
+                    if data is None:
+                        writer.add_topic(topic, a, b)
+                    else:
+                        writer.write(topic, data, a, b)
+                        size += len(data)
+                if size:
+                    with self._cond:
+                        self._buffered -= size
+                        self._cond.notify_all()
+                if time.monotonic() - last_flush >= self._flush_period:
+                    writer.flush()
+                    last_flush = time.monotonic()
+                if stopping and not batch:
+                    return
+        except BaseException as exc:  # noqa: BLE001 - reported by the node
+            self._error = exc
+            with self._cond:
+                self._cond.notify_all()
+
+    def spin(self, stop: threading.Event) -> int:
+        """Record until ``stop`` is set, then take what the middleware still holds; 1 if writing failed."""
+        executor = SingleThreadedExecutor(context=self.context)
+        executor.add_node(self)
+        try:
+            while not stop.is_set() and rclpy.ok():
+                executor.spin_once(timeout_sec=0.1)
+            self.drain(executor)
+        except _Failure:
+            return 1
+        except ExternalShutdownException:
+            pass
+        finally:
+            executor.remove_node(self)
+        return 0
+
+    def drain(self, executor, quiet_s: float = 0.3, limit_s: float = 5.0) -> None:
+        """Take what the middleware still holds for us before closing: a recorder lagging behind a busy
+        graph must not drop the last messages (e.g. the final verdict) because the stop signal came first."""
+        deadline = time.monotonic() + limit_s
+        last, quiet_since = -1, time.monotonic()
+        while time.monotonic() < deadline and time.monotonic() - quiet_since < quiet_s:
+            executor.spin_once(timeout_sec=0.05)
+            received = sum(seen[2] for seen in self._seen.values())
+            if received != last:
+                last, quiet_since = received, time.monotonic()
+
+    def drops(self) -> dict[str, tuple[int, int | None]]:
+        """Per topic (written, published while subscribed): the publisher's sequence numbers count what it
+        sent, so a gap is a message lost in transport. ``None`` when several publishers share the topic
+        (their sequence numbers interleave) or the middleware gives none."""
+        result = {}
+        for topic, (first, last, _received, publishers) in sorted(self._seen.items()):
+            published = None if first is None or publishers > 1 else last - first + 1
+            result[topic] = (self._writer.counts.get(topic, 0), published)
+        return result
+
+
+    def close(self) -> int:
+        """Drain the queue, finish the file, log one summary line; 0 if the bag is complete, else 1."""
+        with self._cond:
+            self._stopping = True
+            self._cond.notify_all()
+        self._thread.join()
+        code = 0
+        if self._error is not None:
+            self.get_logger().error(f"writing {self.output} failed: {self._error}")
+            code = 1
+        duration = time.monotonic() - self._start
+        counts, drops = self._writer.counts, self.drops()
+        total = sum(counts.values())
+        try:
+            self._writer.add_metadata("woody.recorder", {
+                "duration_s": f"{duration:.3f}", "messages": str(total),
+                "counts": ",".join(f"{t}={n}" for t, n in sorted(counts.items())),
+                "written/published": ",".join(f"{t}={_drop_text(*d)}" for t, d in drops.items())})
+            self._writer.close()
+            size = self.output.stat().st_size
+        except Exception as exc:  # noqa: BLE001
+            self.get_logger().error(f"finishing {self.output} failed: {exc}")
+            return 1
+        missing = sorted(self._topics - set(counts))
+        lost = sum(max(0, p - w) for w, p in drops.values() if p is not None)
+        self.get_logger().info(
+            f"wrote {self.output}: {total} messages, {size / 1e6:.1f} MB on disk in {duration:.1f} s, "
+            f"{lost} lost in transport; written/published per topic: "
+            + (", ".join(f"{t} {_drop_text(*d)}" for t, d in drops.items()) or "nothing")
+            + (f"; never seen: {', '.join(missing)}" if missing else ""))
+        return code
+
+
+def _drop_text(written: int, published: int | None) -> str:
+    if published is None:
+        return f"{written}/?"
+    return f"{written}/{published}" + (f" (lost {published - written})" if published > written else "")
+
+
+def main(args: list[str] | None = None) -> int:
+    """Record until SIGINT/SIGTERM, then finish the bag. Exit code 0, 2 on bad parameters, 1 on write errors."""
+    help_text = usage("recorder").splitlines()[0] + "\n" + __doc__.split("\n\n", 1)[1].split("\n\nTiming")[0]
+    return run_node("recorder", Recorder, args, help_text=help_text)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

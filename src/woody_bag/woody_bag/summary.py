@@ -1,0 +1,100 @@
+"""What a bag holds (topics, types, counts, QoS, duration, metadata), cheaply for complete files."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Message, Metadata, Schema
+
+from woody_bag.errors import Truncated
+from woody_bag.records import open_bag, read_summary, span_text, stream_records
+
+
+def bag_topics(path: str | os.PathLike) -> dict[str, str]:
+    """{topic: type name (pkg/msg/Type)} of a bag; a truncated bag is scanned as far as it reads."""
+    return {topic: info["type"] for topic, info in bag_summary(path)["topics"].items()}
+
+
+def bag_summary(path: str | os.PathLike) -> dict[str, Any]:
+    """What a bag holds, cheaply for complete files.
+
+    ``{"path", "complete", "topics": {topic: {"type", "definition", "count", "qos"}}, "message_count",
+    "start_ns", "end_ns", "duration_s", "metadata": {name: {...}}, "error"}`` where ``error``
+    is the truncation message of an incomplete file (else ``None``). Counts of an
+    incomplete file are those of its readable part.
+    """
+    path, handle = open_bag(path)
+    try:
+        summary = read_summary(path, handle)
+        result: dict[str, Any] = {"path": str(path), "complete": summary is not None, "topics": {},
+                                  "metadata": {}, "error": None}
+        if summary is not None:
+            _summarise_complete(result, summary, handle)
+        else:
+            _summarise_by_scanning(result, path, handle)
+        result["duration_s"] = max(0, result["end_ns"] - result["start_ns"]) / 1e9
+        return result
+    finally:
+        handle.close()
+
+
+def _summarise_complete(result: dict[str, Any], summary, handle) -> None:
+    """Fill ``result`` from a complete file's summary section and metadata index."""
+    stats = summary.statistics
+    counts = dict(stats.channel_message_counts) if stats else {}
+    for cid, channel in summary.channels.items():
+        schema = summary.schemas.get(channel.schema_id)
+        result["topics"][channel.topic] = {
+            "type": schema.name if schema else "", "definition": _schema_text(schema),
+            "count": counts.get(cid, 0),
+            "qos": channel.metadata.get("offered_qos_profiles", "")}
+    result["message_count"] = stats.message_count if stats else sum(counts.values())
+    result["start_ns"] = stats.message_start_time if stats else 0
+    result["end_ns"] = stats.message_end_time if stats else 0
+    handle.seek(0)
+    for record in SeekingReader(handle).iter_metadata():
+        result["metadata"][record.name] = dict(record.metadata)
+
+
+def _summarise_by_scanning(result: dict[str, Any], path, handle) -> None:
+    """Fill ``result`` by reading an incomplete file record by record up to where it ends."""
+    handle.seek(0)
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, str] = {}
+    count, start, end = 0, None, None
+    try:
+        for record in stream_records(handle):
+            if isinstance(record, Message):
+                topic = channels.get(record.channel_id)
+                if topic is None:
+                    continue
+                result["topics"][topic]["count"] += 1
+                count += 1
+                start = record.log_time if start is None else min(start, record.log_time)
+                end = record.log_time if end is None else max(end, record.log_time)
+            elif isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record.topic
+                schema = schemas.get(record.schema_id)
+                result["topics"].setdefault(record.topic, {
+                    "type": schema.name if schema else "", "definition": _schema_text(schema), "count": 0,
+                    "qos": record.metadata.get("offered_qos_profiles", "")})
+            elif isinstance(record, Metadata):
+                result["metadata"][record.name] = dict(record.metadata)
+    except Truncated:
+        result["error"] = f"{path}: truncated after {count} messages at {span_text(start, end)}"
+    result["message_count"] = count
+    result["start_ns"] = start or 0
+    result["end_ns"] = end or 0
+
+
+def _schema_text(schema: Schema | None) -> str:
+    return schema.data.decode(errors="replace") if schema is not None else ""
+
+
+def bag_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
+    """The bag's metadata records, e.g. ``{"woody": {...run info...}}``."""
+    return bag_summary(path)["metadata"]

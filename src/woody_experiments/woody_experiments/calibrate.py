@@ -1,0 +1,257 @@
+"""What `woody calibrate` does: fit the chain physics to the paper's side view, choose the Φ threshold, write the YAML.
+
+1. Physics. Total mass M, hinge damper c and the drive's friction cap mu are
+   fitted together against the paper's side-view table (NMDM at k = 0, 10,
+   100, 200, 400, at 100 and 130 FPM) on a few calibration meshes, one lane,
+   side camera only (:mod:`woody_experiments.physics_fit`): a grid over the given
+   values, best by RMS NMDM error plus the distance of ΔNMDM(k=100 − k=0) and
+   of the k = 0 speed gain from their bands.
+2. Threshold. With the fitted physics: top-down runs of the calibration meshes
+   at k ∈ {0, 100} at both speeds, three lanes; the Φ cut that maximises the
+   balanced accuracy of normal (k=0) vs severe (k=100). Classification is then
+   reported on a DISJOINT test mesh set, per speed and lane. The same rows
+   give the top-view speed effect (Φ at 130 vs 100 FPM).
+
+Unless ``--dry-run`` the values and their provenance (command, date, mesh
+sets, targets, achieved figures) are written to ``config/calibration.yaml``
+(:mod:`woody_common.calibration`), which line_sim, the grader, `woody run`
+and `woody sweep` load. The search log goes to ``--out``/calibration.json and
+calibration.md.
+
+``--yaw-sd`` lays every fillet of every step turned on the belt as `woody
+sweep --yaw-sd` and `woody run --yaw-sd` do, so a threshold can be chosen on
+the fillets it will grade; the spread is recorded in the provenance.
+
+``--loo`` instead checks the threshold procedure itself on the reference
+(real) meshes: top-down runs at k ∈ {0, 100}, both speeds, three lanes; per
+speed, each mesh is held out once, the threshold is chosen on the others and
+scored on it, one vote per run (:mod:`woody_experiments.evaluation`). It writes no
+calibration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from woody_common.calibration import Calibration, load_calibration, write_calibration
+from woody_experiments import cluster, evaluation, physics_fit
+from woody_experiments.experiment import RunSpec
+from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, load_meshes
+from woody_experiments.statistics import accuracy, best_threshold, roc
+from woody_experiments.sweep import run_rows
+from woody_sim.meshes import mesh_yaw
+
+SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
+SPEEDS = (100.0, 130.0)
+
+
+def _evaluate(runs: list[RunSpec], mesh_spec: str, client, desc: str) -> list[dict]:
+    """The runs' rows, evaluated on the Dask cluster exactly like `woody sweep` evaluates its grid."""
+    rows: list[dict] = []
+    stats = cluster.run_tasks(client, run_rows, runs, load_meshes(mesh_spec), rows.extend, desc)
+    for line in stats.failed:
+        print(f"woody calibrate: not computed: {line}", file=sys.stderr)
+    return rows
+
+
+def fit_physics(names: list[str], spec: str, args: argparse.Namespace, client) -> tuple[dict, list[dict]]:
+    """Grid search of (M, c, mu) against the paper's side table; the best point's values and the log."""
+    def evaluate(point: physics_fit.FitPoint) -> list[dict]:
+        runs = [RunSpec(n, k, s, lanes=1, mass=point.mass, damping=point.damping,
+                        friction_static=point.friction_static, top=False, yaw_deg=mesh_yaw(n, args.yaw_sd))
+                for n in names for s in SPEEDS for k in SIDE_K]
+        return _evaluate(runs, spec, client, f"M={point.mass:g} c={point.damping:g} mu={point.friction_static:g}")
+
+    def report(point, entry, score) -> None:
+        print(f"  M {point.mass:g} kg, c {point.damping:g}, mu {point.friction_static:g}: objective {score:.3f}, "
+              f"NMDM(k=0) {entry['nmdm_k0_100fpm']:.3f}, ΔNMDM {entry['delta_nmdm_100fpm']:.3f}, "
+              f"k=0 speed gain {entry['nmdm_k0_speed_gain']:+.3f}", file=sys.stderr)
+
+    points = physics_fit.grid(args.masses, args.dampings, args.frictions)
+    best, log = physics_fit.search(points, evaluate, report)
+    values = {"total_mass_kg": best.mass, "hinge_damping": best.damping, "friction_static": best.friction_static,
+              "friction_dynamic": best.friction_dynamic}
+    return values, log
+
+
+def _phi_split(rows: list[dict]) -> tuple[list[float], list[float]]:
+    ok = [r for r in rows if r.get("status") == "scored" and math.isfinite(r.get("phi", math.nan))]
+    return [r["phi"] for r in ok if r["k"] == 0.0], [r["phi"] for r in ok if r["k"] == 100.0]
+
+
+def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict, args: argparse.Namespace,
+                     client) -> dict:
+    """Φ cut on the calibration meshes, its accuracy on the held-out ones, and the top-view speed effect."""
+    def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
+        runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
+                        friction_static=physics["friction_static"], side=False, yaw_deg=mesh_yaw(n, args.yaw_sd))
+                for n in names for s in SPEEDS for k in (0.0, 100.0)]
+        return _evaluate(runs, spec, client, desc)
+
+    cal_rows = rows_for(cal_names, args.meshes, "threshold (calibration set)")
+    normal, severe = _phi_split(cal_rows)
+    threshold, bacc = best_threshold(normal, severe)
+    report = {"threshold": round(threshold, 2), "calibration_balanced_accuracy": bacc,
+              "calibration_auc": roc(normal, severe)[2], "calibration_n": [len(normal), len(severe)],
+              "top_speed_effect": _speed_effect(cal_rows)}
+    print(f"woody calibrate: Φ threshold = {report['threshold']:g} (balanced accuracy {bacc * 100:.1f} % on "
+          f"{len(normal)} normal / {len(severe)} severe calibration fillets)")
+    report["test"] = _held_out(rows_for(test_names, args.test_meshes, "held-out test set"), report["threshold"])
+    return report
+
+
+def _speed_effect(rows: list[dict]) -> dict:
+    """Mean Φ per k at 100 and 130 FPM (the paper: every class lower at 130 FPM, k = 0 above all)."""
+    out = {}
+    for k in (0.0, 100.0):
+        means = [np.mean([r["phi"] for r in rows if r["k"] == k and r["speed_fpm"] == s and r.get("status") == "scored"
+                          and math.isfinite(r["phi"])] or [math.nan]) for s in SPEEDS]
+        out[f"phi_k{k:g}"] = {f"{s:g}fpm": float(m) for s, m in zip(SPEEDS, means)}
+    return out
+
+
+def _held_out(rows: list[dict], threshold: float) -> list[dict]:
+    per = []
+    for speed in SPEEDS:
+        for lane in (None, 0, 1, 2):
+            sel = [r for r in rows if r["speed_fpm"] == speed and (lane is None or r["lane"] == lane)]
+            n, s = _phi_split(sel)
+            acc, right, total = accuracy(n, s, threshold)
+            per.append({"speed_fpm": speed, "lane": "all" if lane is None else lane, "accuracy": acc,
+                        "right": right, "total": total, "auc": roc(n, s)[2]})
+            print(f"  held-out {speed:g} FPM lane {per[-1]['lane']}: accuracy {acc * 100:.1f} % ({right}/{total}), "
+                  f"AUC {per[-1]['auc']:.3f}")
+    return per
+
+
+def _provenance(args: argparse.Namespace, report: dict) -> dict:
+    """Flat key -> value record of how the calibration was made and what it reached."""
+    out = {"command": "woody calibrate " + shlex.join(sys.argv[2:]), "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+           "calibration_meshes": args.meshes, "fit_meshes": report.get("fit_meshes", ""),
+           "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd,
+           "targets": "paper Table sv_results (NMDM at k 0/10/100/200/400, "
+           "100 and 130 FPM); ΔNMDM(k=100-k=0) 0.20-0.32; NMDM(k=0) gain >= 0.05 at 130 FPM"}
+    best = min(report.get("physics_fit", []), key=lambda e: e["objective"], default=None)
+    if best is not None:
+        out.update({f"achieved_{k}": round(v, 4) for k, v in best.items() if k.startswith(("nmdm", "delta"))})
+        out["achieved_objective"] = round(best["objective"], 4)
+    for t in report.get("test", []):
+        if t["lane"] == "all":
+            out[f"achieved_heldout_accuracy_{t['speed_fpm']:g}fpm"] = round(t["accuracy"], 4)
+    return out
+
+
+def calibrate(args: argparse.Namespace, client) -> int:
+    """The whole calibration (or, with ``args.loo``, the leave-one-out check) on the Dask ``client``."""
+    out = Path(args.out)
+    if args.loo:
+        return run_loo(args.meshes or LOO_MESHES, client, out, args.yaw_sd)
+    args.meshes = args.meshes or CALIBRATION_MESHES
+    try:
+        cal_names = list(load_meshes(args.meshes))
+        test_names = list(load_meshes(args.test_meshes))
+    except ValueError as exc:  # a malformed spec or a missing path
+        print(f"woody calibrate: {exc}", file=sys.stderr)
+        return 2
+    if set(cal_names) & set(test_names):
+        overlap = sorted(set(cal_names) & set(test_names))
+        print(f"woody calibrate: test meshes overlap the calibration meshes: {overlap}", file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    current = load_calibration(args.calibration)
+    physics = {k: getattr(current, k)
+               for k in ("total_mass_kg", "hinge_damping", "friction_static", "friction_dynamic")}
+    report: dict = {"calibration_meshes": args.meshes, "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd,
+                    "started": time.ctime()}
+    t0 = time.perf_counter()
+    if not args.skip_physics:
+        names = cal_names[: max(1, args.fit_meshes)]
+        print(f"woody calibrate: physics fit on {len(names)} meshes, side view, k {SIDE_K}, {SPEEDS} FPM",
+              file=sys.stderr)
+        physics, report["physics_fit"] = fit_physics(names, args.meshes, args, client)
+        report["fit_meshes"] = ",".join(names)
+        print(f"woody calibrate: M = {physics['total_mass_kg']:g} kg, c = {physics['hinge_damping']:g}, "
+              f"mu = {physics['friction_static']:g}")
+    report["physics"] = physics
+    threshold = current.phi_threshold
+    if not args.skip_threshold:
+        report.update(choose_threshold(cal_names, test_names, physics, args, client))
+        threshold = report["threshold"]
+    report["wall_s"] = round(time.perf_counter() - t0, 1)
+    (out / "calibration.json").write_text(json.dumps(report, indent=2))
+    _write_md(out / "calibration.md", report)
+    if not args.dry_run:
+        calibration = Calibration(**physics, phi_threshold=threshold, provenance=_provenance(args, report))
+        path = write_calibration(calibration, args.calibration, header=CALIBRATION_HEADER)
+        print(f"woody calibrate: wrote {path}")
+    return 0
+
+
+CALIBRATION_HEADER = """woody line calibration, written by `woody calibrate` (do not edit by hand; rerun it).
+A ROS 2 parameters file: line_sim and grader load it (woody run passes --params-file);
+woody sweep and woody calibrate read it through woody_common.calibration."""
+
+
+def _write_md(path: Path, report: dict) -> None:
+    physics = report["physics"]
+    lines = ["# Calibration\n", f"M = **{physics['total_mass_kg']:g} kg**, c = **{physics['hinge_damping']:g}**, "
+             f"mu = **{physics['friction_static']:g}**; Φ threshold = **{report.get('threshold', 'n/a')}**; "
+             f"fillets turned by a yaw sd of {report['yaw_sd_deg']:g} deg; "
+             f"wall {report.get('wall_s', 0) / 60:.1f} min.\n"]
+    if "physics_fit" in report:
+        lines += ["| M (kg) | c | mu | NMDM k=0 | ΔNMDM | k=0 speed gain | objective |",
+                  "|---|---|---|---|---|---|---|"]
+        lines += [f"| {p['mass']:g} | {p['damping']:g} | {p['friction_static']:g} | {p['nmdm_k0_100fpm']:.3f} | "
+                  f"{p['delta_nmdm_100fpm']:.3f} | {p['nmdm_k0_speed_gain']:+.3f} | {p['objective']:.3f} |"
+                  for p in report["physics_fit"]]
+    if "test" in report:
+        lines += ["", f"Threshold from `{report['calibration_meshes']}` (balanced accuracy "
+                  f"{report['calibration_balanced_accuracy'] * 100:.1f} %, AUC {report['calibration_auc']:.3f}); "
+                  f"held-out `{report['test_meshes']}`:\n", "| FPM | lane | accuracy | right/total | AUC |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| {t['speed_fpm']:g} | {t['lane']} | {t['accuracy'] * 100:.1f} % | {t['right']}/{t['total']} | "
+                  f"{t['auc']:.3f} |" for t in report["test"]]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def run_loo(spec: str, client, out: Path, yaw_sd: float = 0.0) -> int:
+    """`woody calibrate --loo`: leave-one-mesh-out threshold check on the reference meshes of ``spec``."""
+    try:
+        names = [n for n in load_meshes(spec) if evaluation.mesh_set(n) == evaluation.SET_REFERENCE]
+    except ValueError as exc:
+        print(f"woody calibrate: {exc}", file=sys.stderr)
+        return 2
+    if len(names) < 2:
+        print(f"woody calibrate: --loo needs at least two reference (non-generated) meshes in '{spec}', got {names}",
+              file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    mass = load_calibration().total_mass_kg
+    runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False, yaw_deg=mesh_yaw(n, yaw_sd)) for n in names
+            for s in (100.0, 130.0) for k in (evaluation.NORMAL_K, evaluation.SEVERE_K)]
+    rows = _evaluate(runs, spec, client, f"leave-one-out ({len(names)} reference meshes)")
+    units = evaluation.run_units(rows)
+    report: dict = {"meshes": names, "mass": mass, "yaw_sd_deg": yaw_sd, "speeds": {}}
+    lines = [f"# Leave-one-out over {len(names)} reference meshes (M = {mass:g} kg, yaw sd {yaw_sd:g} deg)\n"]
+    for speed in (100.0, 130.0):
+        folds = evaluation.leave_one_out([u for u in units if u.speed_fpm == speed])
+        total = evaluation.pooled(folds)
+        report["speeds"][f"{speed:g}"] = {
+            "folds": [{"held_out": f.held_out, "threshold": f.threshold, "train_balanced_accuracy":
+                       f.train_balanced_accuracy, "right": f.test.right, "total": f.test.total} for f in folds],
+            "right": total.right, "total": total.total, "accuracy": total.accuracy, "wilson95": total.interval}
+        lines.append(f"{speed:g} FPM: {total.text()}")
+        lines += [f"  held out {f.held_out}: threshold {f.threshold:.2f} from the others -> {f.test.text()}"
+                  for f in folds]
+    print("\n".join(lines))
+    (out / "loo.json").write_text(json.dumps(report, indent=2))
+    (out / "loo.md").write_text("\n".join(lines) + "\n")
+    return 0

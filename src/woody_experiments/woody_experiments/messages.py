@@ -1,0 +1,66 @@
+"""The line's messages as the run report's records: live (`woody run` watches the line) or from a recorded bag.
+
+`spawn_from_msg` and `verdict_from_msg` flatten woody_msgs/FilletSpawn and
+FilletVerdict into :mod:`woody_experiments.run_report`'s `Spawn` and `Verdict`;
+`rows_from_bag` and `settings_from_bag` read them back from a recording (`woody report BAG`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from woody_bag.errors import BagError
+from woody_bag.reader import read_bag
+from woody_bag.schemas import decode
+from woody_bag.summary import bag_metadata, bag_topics
+from woody_common import topics
+from woody_common.stamps import stamp_to_seconds
+from woody_experiments.run_report import Spawn, Verdict, join
+
+
+def spawn_from_msg(msg) -> Spawn:
+    """Flatten a woody_msgs/FilletSpawn (the line's ground truth) into the report's Spawn."""
+    return Spawn(sim_id=msg.fillet_id, lane=msg.lane, mesh=msg.mesh, k=msg.stiffness, mass=msg.mass,
+                 line_speed=msg.line_speed, stamp=stamp_to_seconds(msg.header.stamp), spawn_x=msg.position.x)
+
+
+def verdict_from_msg(msg) -> Verdict:
+    """Flatten a woody_msgs/FilletVerdict into the report's Verdict."""
+    classes = {msg.CLASS_NORMAL: "normal", msg.CLASS_WOODY: "woody", msg.CLASS_UNSCORED: "unscored"}
+    return Verdict(fillet_id=msg.fillet_id, lane=msg.lane, stamp=stamp_to_seconds(msg.header.stamp),
+                   classification=classes.get(msg.classification, "unscored"), grade=msg.grade, phi=msg.phi,
+                   hu_term=msg.hu_term, solidity_term=msg.solidity_term, nmdm=msg.nmdm, mdm=msg.mdm, be=msg.be,
+                   reason=msg.unscored_reason, threshold=msg.threshold)
+
+
+def rows_from_bag(path: Path, woody_k: float = 50.0) -> tuple[list[dict], str | None]:
+    """Ground truth and verdicts recorded in a bag (of a line in any namespace), joined into verdict-table rows,
+    and where a truncated bag ends (None for a complete one): the readable part of a cut recording still counts."""
+    spawns, verdicts, ended = [], [], None
+    try:
+        wanted = [t for t in bag_topics(path) if t.endswith(("/" + topics.GROUND_TRUTH, "/" + topics.VERDICTS))]
+        for topic, type_name, data, _log_time in read_bag(path, topics=wanted):
+            msg = decode(type_name, data)
+            if topic.endswith("/" + topics.GROUND_TRUTH):
+                spawns.append(spawn_from_msg(msg))
+            else:
+                verdicts.append(verdict_from_msg(msg))
+    except BagError as exc:
+        if not spawns and not verdicts:
+            raise
+        ended = str(exc)
+    if not spawns and not verdicts:
+        raise ValueError(f"{path}: no /line/ground_truth or /grading/verdicts messages in this bag")
+    return join(spawns, verdicts, woody_k), ended
+
+
+def settings_from_bag(path: Path, rows: list[dict]) -> dict | None:
+    """The settings table of the run that recorded the bag (the recorder's ``woody.run`` record)."""
+    record = bag_metadata(path).get("woody", {}).get("run_settings")
+    if not record:
+        return None
+    settings = json.loads(record)
+    settings["fillets spawned"] = sum(1 for r in rows if r.get("truth"))
+    settings["verdicts"] = sum(1 for r in rows if r["verdict"] != "missing")
+    return settings

@@ -1,0 +1,124 @@
+"""The drop-test grid of `woody sweep`: the paper's k and speeds, the runs of a grid, and its ``runs.csv``.
+
+One run = the same mesh in every lane at one stiffness k and speed
+(:func:`woody_experiments.experiment.evaluate_run`); it yields one row per lane
+(fillet). Top-down columns (phi, hu_term, solidity_term) come from every lane,
+side-view columns (nmdm, mdm, be) from the centre lane the side camera
+watches, empty elsewhere. Only the client writes ``runs.csv`` (`RunsFile`):
+each batch of finished runs replaces the file atomically, so a killed or
+interrupted sweep leaves a valid file and loses at most the runs in flight;
+`completed_runs` tells a rerun which runs are done (a run with missing lane
+rows, or without its trace when traces are asked for, is redone).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from pathlib import Path
+
+from woody_experiments.experiment import RUN_COLUMNS, RunSpec, evaluate_run
+from woody_experiments.traces import run_file
+from woody_sim.meshes import mesh_yaw
+
+TOP_K = (0.0, 20.0, 40.0, 60.0, 80.0, 100.0)
+"""Paper, top-down view (Table tdv_results)."""
+SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
+"""Paper, side view (Table sv_results)."""
+DEFAULT_K = tuple(sorted(set(TOP_K) | set(SIDE_K)))
+DEFAULT_SPEEDS = (100.0, 130.0)
+META_FILE = "sweep_meta.json"
+CSV_FILE = "runs.csv"
+
+
+def run_key(mesh: str, k: float, speed: float, mass: float) -> tuple:
+    return (mesh, round(float(k), 6), round(float(speed), 6), round(float(mass), 6))
+
+
+def read_rows(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+class RunsFile:
+    """``runs.csv``, written by the client only: every write replaces the whole file atomically.
+
+    The text is kept in memory and written to a temporary file that is
+    fsync'ed and renamed over the old one, so a Ctrl-C or a kill at any moment
+    leaves either the previous batch's file or the new one, never a torn row.
+    """
+
+    def __init__(self, path: Path, rows: list[dict]):
+        self.path = path
+        self._text = _csv_text(rows, header=True)
+        self._replace()
+
+    def append(self, rows: list[dict]) -> None:
+        self._text += _csv_text(rows, header=False)
+        self._replace()
+
+    def _replace(self) -> None:
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        with tmp.open("w", newline="") as fh:
+            fh.write(self._text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, self.path)
+
+
+def _csv_text(rows: list[dict], header: bool) -> str:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=RUN_COLUMNS, extrasaction="ignore")
+    if header:
+        writer.writeheader()
+    for row in rows:
+        writer.writerow({c: _fmt(row.get(c, "")) for c in RUN_COLUMNS})
+    return buffer.getvalue()
+
+
+def _fmt(value) -> object:
+    if isinstance(value, float):
+        return "" if math.isnan(value) else f"{value:.6g}"
+    return value
+
+
+def completed_runs(path: Path, lanes: int, traced: Path | None = None) -> tuple[set[tuple], RunsFile]:
+    """Keys of runs with all their lane rows in the CSV (and, with ``traced`` = the sweep folder, their trace
+    file), and the file to append to without the other runs' rows (they are redone cleanly)."""
+    rows = read_rows(path)
+    by_run: dict[tuple, list[dict]] = {}
+    for row in rows:
+        try:
+            key = run_key(row["mesh"], float(row["k"]), float(row["speed_fpm"]), float(row["mass"]))
+        except (KeyError, ValueError):
+            continue
+        by_run.setdefault(key, []).append(row)
+    done = {key for key, rs in by_run.items() if {int(r["lane"]) for r in rs} >= set(range(lanes))}
+    if traced is not None:
+        done = {key for key in done if run_file(traced, key[0], key[1], key[2], key[3]).exists()}
+    keep = [r for key, rs in by_run.items() if key in done for r in rs]
+    return done, RunsFile(path, keep)
+
+
+# ---------------------------------------------------------------- evaluation
+
+def run_rows(run: RunSpec, mesh) -> list[dict]:
+    """One run's rows, on a worker; an evaluation error becomes error rows so one broken mesh cannot stop a sweep."""
+    try:
+        return evaluate_run(run, mesh)
+    except Exception as exc:
+        return [{"mesh": run.mesh, "k": run.k, "speed_fpm": run.speed_fpm, "lane": lane, "mass": run.mass,
+                 "status": "error", "reason": f"{type(exc).__name__}: {exc}"} for lane in range(run.lanes)]
+
+
+def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
+         side: bool = True, top_camera: str = "default", sensor: str = "ideal", yaw_sd: float = 0.0
+         ) -> list[RunSpec]:
+    """Runs ordered so that partial results already span the grid (k and speed vary fastest)."""
+    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side, top_camera=top_camera,
+                    sensor=sensor, yaw_deg=mesh_yaw(name, yaw_sd))
+            for name in mesh_names for speed in speeds for k in ks]

@@ -1,0 +1,146 @@
+"""The figures of `woody bench sim`, `woody bench vision` and `woody bench graph`: the speed figures the README records.
+
+Each benchmark calls the same modules the nodes use; the end-to-end figures
+(line_sim's real-time factor, verdict latency, `woody run`, a sweep) start the
+real entry points as separate processes and measure them from outside.
+
+Machines differ about 2x and a shared one varies from minute to minute, so
+every run also times a fixed reference workload (numpy and plain Python,
+:func:`reference_ms`) and prints each figure divided by it (``*_ref``: a time
+in reference workloads, a rate per reference workload); the renderer is also
+compared with pybullet's TinyRenderer on the same scene.
+"""
+
+from __future__ import annotations
+
+import re
+import statistics
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from woody_common.stamps import stamp_to_seconds
+from woody_sim.meshes import BUILTIN_DIR
+from woody_tools.processes import NodeProcess, entry_point, lease_domain
+
+
+def reference_ms(repeats: int = 9) -> float:
+    """Median wall ms of a fixed workload (a 200x200 matmul, a sort of a frame-sized array, a Python loop)."""
+    rng = np.random.default_rng(0)
+    matrix = rng.random((200, 200))
+    frame = rng.random((376, 672)).astype(np.float32)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        matrix @ matrix
+        np.sort(frame, axis=None)
+        total = 0.0
+        for i in range(20000):
+            total += i * 0.5
+        times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+RATES = ("rtf", "per_min")
+"""Keys containing these are rates (more is faster); the other keys with _ms are times ..."""
+NOT_TIMED = {"physics_dt_ms"}
+"""... except these (settings, not measurements)."""
+
+
+def with_reference(figures: dict, reference: float) -> dict:
+    """Each figure followed by its value in reference workloads (times) or per reference workload (rates)."""
+    out = {}
+    for key, value in figures.items():
+        out[key] = value
+        if isinstance(value, float) and any(r in key for r in RATES):
+            out[f"{key}_ref"] = value * reference / 1e3
+        elif isinstance(value, float) and "_ms" in key and key not in NOT_TIMED:
+            out[f"{key}_ref"] = value / reference
+    return out
+
+
+def bench_sim(seconds: float) -> dict:
+    from woody_tools.benchmarks.physics import benchmark_physics
+    from woody_tools.benchmarks.rendering import benchmark_rendering
+
+    physics = {n: benchmark_physics(n, seconds) for n in (1, 3, 6)}
+    render = benchmark_rendering(n_fillets=3, frames=120)
+    figures = {f"physics_step_ms_{n}": p["ms_per_step"] for n, p in physics.items()}
+    figures["physics_dt_ms"] = 1000.0 * physics[3]["sim_seconds"] / physics[3]["steps"]
+    figures.update({f"physics_rtf_{n}": physics[n]["sim_s_per_wall_s"] for n in (3, 6)})
+    for view in ("top", "side"):
+        figures[f"render_{view}_ms"] = render[f"{view}_ms_p50"]
+        figures[f"render_{view}_ms_p95"] = render[f"{view}_ms_p95"]
+        figures[f"tinyrenderer_{view}_ms"] = render[f"tiny_{view}_ms_p50"]
+        figures[f"render_{view}_speedup_vs_tinyrenderer"] = render[f"{view}_speedup_vs_tiny"]
+    figures["rtf"] = line_sim_rtf(seconds)
+    figures["rtf_without_physics_worker"] = line_sim_rtf(seconds, physics_workers=0)
+    figures["rtf_side_200hz"] = line_sim_rtf(seconds, side_rate_hz=200.0)
+    return figures
+
+
+def bench_graph(fillets: int = 12) -> dict:
+    """`woody run` (demo graph with the recorder) and a sweep of the three reference meshes, as subprocesses."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run"
+        demo = subprocess.run([entry_point("woody"), "run", "--fillets", str(fillets), "--out", str(out)],
+                              check=True, capture_output=True, text=True)
+        sweep = subprocess.run([entry_point("woody"), "sweep", "--meshes", str(BUILTIN_DIR), "--no-report", "--out",
+                                str(Path(tmp) / "sweep")], check=True, capture_output=True, text=True)
+    rtf = re.search(r"wall: rtf ([0-9.]+)x", demo.stdout)
+    line = re.search(r"the line itself, after ([0-9.]+) s of node start-up: rtf ([0-9.]+)x", demo.stdout)
+    rate = re.search(r"= ([0-9.]+) /min", sweep.stdout + sweep.stderr)
+    if rtf is None or line is None or rate is None:
+        raise RuntimeError("woody run or woody sweep did not report its speed")
+    return {"woody_run_rtf": float(rtf.group(1)), "woody_run_line_rtf": float(line.group(2)),
+            "woody_run_startup_s": float(line.group(1)), "sweep_evals_per_min": float(rate.group(1))}
+
+
+def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_rate_hz: float = 60.0,
+                 physics_workers: int = 1) -> float:
+    """Sim seconds per wall second of the real line_sim process (3 lanes, top 30 Hz, side ``side_rate_hz``;
+    ``physics_workers=0`` keeps all its physics in its main process)."""
+    import rclpy
+    from rosgraph_msgs.msg import Clock
+
+    warmup = 2.0
+    with lease_domain() as lease, tempfile.TemporaryDirectory() as logs:
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=lease.domain_id)
+        node = rclpy.create_node("bench_clock", context=context)
+        samples: list[tuple[float, float]] = []
+        node.create_subscription(Clock, "/clock", lambda m: samples.append(
+            (time.monotonic(), stamp_to_seconds(m.clock))), 100)
+        sim = NodeProcess("line_sim", {"lanes": lanes, "line_speed_fpm": speed_fpm, "top_rate_hz": 30.0,
+                                       "side_rate_hz": side_rate_hz, "duration_s": warmup + seconds,
+                                       "physics_workers": physics_workers},
+                          domain_id=lease.domain_id, log_dir=Path(logs))
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        try:
+            while sim.alive():
+                executor.spin_once(timeout_sec=0.1)
+        finally:
+            sim.stop()
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+        steady = [(w, s) for w, s in samples if s >= warmup]
+        if len(steady) < 2:
+            raise RuntimeError(f"line_sim published too little /clock to measure; see its log:\n{sim.log_tail()}")
+        (w0, s0), (w1, s1) = steady[0], steady[-1]
+        return (s1 - s0) / (w1 - w0)
+
+
+def bench_vision(frames: int, seconds: float) -> dict:
+    from woody_tools.benchmarks.verdict_latency import measure_verdict_latency
+    from woody_tools.benchmarks.vision import benchmark_vision
+
+    figures = dict(benchmark_vision(frames=frames))
+    latency = measure_verdict_latency(seconds)  # closing frame published -> verdict received, across processes
+    figures["verdict_latency_ms_p50"] = latency["p50_ms"]
+    figures["verdict_latency_ms_p95"] = latency["p95_ms"]
+    figures["verdict_latency_count"] = latency["count"]
+    return figures

@@ -1,0 +1,186 @@
+"""Every node's command line through the real entry points: a bad argument is one line and exit code 2.
+
+Covers `woody_common.ros_params` (declare, check_overrides, init_checked, run_node) as every
+node uses it: unknown names are refused with the known ones, malformed overrides and
+stray arguments never reach a traceback, untyped lists are refused, ``--help`` lists the
+parameters, and every declared parameter is read-only (they are read at start-up).
+Also: whole numbers for decimal parameters (``-p line_speed_fpm:=130``), ranges still enforced.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+
+import pytest
+import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.parameter import Parameter
+
+from woody_common.ros_params import declare
+from woody_tools.processes import entry_point
+
+pytestmark = pytest.mark.ros
+"""Starts node entry points or `woody` as processes."""
+
+NODES = ["line_sim", "segmenter", "grader", "reject_gate", "recorder"]
+
+
+def run(domain: int, *command: str) -> subprocess.CompletedProcess:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    return subprocess.run([entry_point(command[0]), *command[1:]], capture_output=True, text=True, timeout=60,
+                          env=env, cwd="/tmp")
+
+
+def error_lines(result: subprocess.CompletedProcess) -> list[str]:
+    """What the node said, without pybullet's import banner."""
+    text = result.stderr + result.stdout
+    return [line for line in text.splitlines() if line.strip() and not line.startswith("pybullet build time")]
+
+
+@pytest.mark.parametrize("command,expected", [
+    *[((node, "--ros-args", "-p", "line_sped_fpm:=130"), "unknown parameter line_sped_fpm") for node in NODES],
+    (("grader", "--ros-args", "-p", "lanes:=["),
+     "bad --ros-args: Couldn't parse parameter override rule: '-p lanes:=['"),
+    (("segmenter", "--ros-args", "-p", "lanes"), "bad --ros-args: Couldn't parse parameter override rule: '-p lanes'"),
+    (("line_sim", "--ros-args", "-p", "k_values:=[]"), "parameter k_values: needs a value like [0.0, 100.0]"),
+    (("reject_gate", "--ros-args", "-p", "gate_distance_m:=[]"), "parameter gate_distance_m: needs a value like [0.6]"),
+    (("line_sim", "--ros-args", "-p", "k_values:=[.nan]"), "k_values must be a non-empty list of finite values"),
+    (("reject_gate", "--ros-args", "-p", "line_speed_fpm:=0.5"), "out of range"),
+])
+def test_bad_parameters_give_one_line_and_exit_2(ros_domain, command, expected):
+    result = run(ros_domain, *command)
+    lines = error_lines(result)
+    assert result.returncode == 2, lines
+    assert len(lines) == 1 and expected in lines[0], lines
+    if "unknown" in expected:
+        assert "knows: " in lines[0] and ("lanes," in lines[0] or "output," in lines[0])
+
+
+@pytest.mark.parametrize("node", NODES)
+def test_stray_arguments_print_usage_and_exit_2(ros_domain, node):
+    result = run(ros_domain, node, "--lanes", "3")
+    assert result.returncode == 2
+    lines = error_lines(result)
+    assert lines[0] == f"{node}: unexpected argument --lanes 3" and lines[1].startswith(f"usage: {node} "), lines
+    assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("node,parameter", [("segmenter", "lanes"), ("reject_gate", "gate_distance_m"),
+                                            ("recorder", "output")])
+def test_help_lists_the_parameters(ros_domain, node, parameter):
+    result = run(ros_domain, node, "--help")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith(f"usage: {node} ") and parameter in result.stdout
+
+
+def test_declared_parameters_are_read_only():
+    import rclpy
+    from rclpy.node import Node
+
+    from woody_common.ros_params import declare
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=0)
+    try:
+        node = Node("probe", context=context)
+        declare(node, "lanes", 3, "Lanes.", 1, 6)
+        assert node.describe_parameter("lanes").read_only
+        result = node.set_parameters([rclpy.parameter.Parameter("lanes", value=4)])[0]
+        assert not result.successful and node.get_parameter("lanes").value == 3
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+SUMMARIES = {"line_sim": "stopped at sim time", "segmenter": "[segmenter] ", "grader": "[grader] published",
+             "reject_gate": "[reject_gate] diverted", "recorder": "wrote "}
+
+
+def handles_stop_signals(pid: int) -> bool:
+    """True once the process catches SIGINT and SIGTERM (its handlers are installed)."""
+    import signal
+
+    try:
+        status = open(f"/proc/{pid}/status").read()
+    except OSError:
+        return False
+    caught = int(status.split("SigCgt:")[1].split()[0], 16)
+    return all(caught >> (sig - 1) & 1 for sig in (signal.SIGINT, signal.SIGTERM))
+
+
+@pytest.mark.parametrize("node,sig", [(n, "SIGINT") for n in NODES]
+                         + [("line_sim", "SIGTERM"), ("grader", "SIGTERM"), ("recorder", "SIGTERM")])
+def test_every_node_stops_cleanly_with_one_summary_line(ros_domain, tmp_path, node, sig):
+    """SIGINT to the whole process group (a terminal's Ctrl-C reaches line_sim's render process too) or SIGTERM."""
+    import signal
+    import time
+
+    from woody_tools.processes import wait_for
+
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), PYTHONUNBUFFERED="1")
+    log = tmp_path / "node.log"
+    extra = ["--ros-args", "-p", f"output:={tmp_path}/r.mcap"] if node == "recorder" else []
+    with log.open("w") as handle:
+        proc = subprocess.Popen([entry_point(node), *extra], stdout=handle, stderr=subprocess.STDOUT, env=env,
+                                start_new_session=True)
+        assert wait_for(lambda: handles_stop_signals(proc.pid), timeout=60)
+        if node == "line_sim":  # stop it while it simulates, not while it loads
+            assert wait_for(lambda: "lanes at" in log.read_text(), timeout=60)
+        time.sleep(1.5)
+        if sig == "SIGINT":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGTERM)
+        code = proc.wait(60)
+    text = log.read_text()
+    assert code == 0, text
+    assert "Traceback" not in text and "RuntimeError" not in text and "RCLError" not in text, text
+    assert sum(SUMMARIES[node] in line for line in text.splitlines()) == 1, text
+
+
+@pytest.fixture
+def make_node():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    nodes = []
+
+    def make(**overrides):
+        node = rclpy.create_node(f"params_{len(nodes)}", context=context,
+                                 parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
+        nodes.append(node)
+        return node
+
+    yield make
+    for node in nodes:
+        node.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
+def test_a_whole_number_for_a_decimal_parameter_is_that_decimal(make_node):
+    node = make_node(speed=130, ks=[0, 100])
+    assert declare(node, "speed", 100.0, "speed", 1.0, 400.0) == 130.0
+    assert isinstance(node.get_parameter("speed").value, float)
+    assert declare(node, "ks", [0.0, 100.0], "k values") == [0.0, 100.0]
+    assert node.get_parameter("ks").type_ == Parameter.Type.DOUBLE_ARRAY
+
+
+def test_the_range_still_holds_for_whole_numbers_and_other_types_are_still_refused(make_node):
+    with pytest.raises(InvalidParameterValueException):
+        declare(make_node(speed=0), "speed", 100.0, "speed", 1.0, 400.0)
+    with pytest.raises(InvalidParameterTypeException):
+        declare(make_node(speed="fast"), "speed", 100.0, "speed", 1.0, 400.0)
+    with pytest.raises(InvalidParameterTypeException):
+        declare(make_node(lanes=2.5), "lanes", 3, "lanes", 1, 6)
+    assert declare(make_node(speed=2.5), "speed", 100.0, "speed", 1.0, 400.0) == 2.5
+
+
+def test_a_node_started_with_a_whole_number_speed_runs_and_one_out_of_range_exits_with_one_line(ros_domain):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+    command = [entry_point("reject_gate"), "--ros-args", "-p", "line_speed_fpm:=130"]
+    with pytest.raises(subprocess.TimeoutExpired):
+        subprocess.run(command, capture_output=True, timeout=4, env=env)
+    result = subprocess.run([*command[:-1], "line_speed_fpm:=1000"], capture_output=True, text=True, timeout=30,
+                            env=env)
+    assert result.returncode == 2 and "out of range" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

@@ -1,0 +1,216 @@
+"""The real entry points as separate processes: line_sim's topics, and the whole grading graph."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import spin_until
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from woody_common.stamps import stamp_to_seconds
+from woody_tools.processes import NodeProcess
+
+pytestmark = pytest.mark.ros
+"""Starts node entry points or `woody` as processes."""
+
+
+def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_path):
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from woody_msgs.msg import FilletSpawn
+
+    duration = 3.0
+    topics = {
+        "/top_camera/color/image_raw": Image, "/top_camera/depth/image_raw": Image,
+        "/top_camera/color/camera_info": CameraInfo, "/top_camera/depth/camera_info": CameraInfo,
+        "/side_camera/image_raw": Image, "/side_camera/camera_info": CameraInfo,
+    }
+    received: dict[str, list] = {name: [] for name in [*topics, "/clock", "/line/ground_truth"]}
+    reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    for name, msg_type in topics.items():
+        ros_node.create_subscription(msg_type, name, lambda m, n=name: received[n].append(m), reliable)
+    ros_node.create_subscription(Clock, "/clock", lambda m: received["/clock"].append(stamp_to_seconds(m.clock)), 100)
+    ros_node.create_subscription(FilletSpawn, "/line/ground_truth", received["/line/ground_truth"].append,
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    # Paced to the wall clock: unpaced, the line runs faster than real time (two physics processes), and this
+    # test's one Python thread, taking 2 MB side frames at 60 Hz, then falls behind the cameras' 10-deep queues.
+    sim = NodeProcess("line_sim", {"duration_s": duration, "wait_for_subscribers": 1, "side_rate_hz": 60.0,
+                                   "side_idle_rate_hz": 60.0, "realtime": True},
+                      domain_id=ros_domain, log_dir=tmp_path)
+    try:
+        spin_until(ros_node, lambda: not sim.alive(), timeout=120.0)
+        spin_until(ros_node, lambda: False, timeout=1.0)
+    finally:
+        assert sim.stop() == 0, sim.log_tail()
+
+    def stamps(name):
+        return np.array([stamp_to_seconds(m.header.stamp) for m in received[name]])
+
+    top, side = stamps("/top_camera/depth/image_raw"), stamps("/side_camera/image_raw")
+    assert abs(len(top) - 30 * duration) <= 3, len(top)
+    assert abs(len(side) - 60 * duration) <= 3, len(side)
+    assert np.allclose(np.diff(top), 1 / 30, atol=0.003) and np.allclose(np.diff(side), 1 / 60, atol=0.003)
+    assert len(stamps("/top_camera/color/image_raw")) == len(top) == len(stamps("/top_camera/depth/camera_info"))
+    clock = np.array(received["/clock"])
+    assert len(clock) > 100 and np.all(np.diff(clock) > 0) and clock[-1] == pytest.approx(duration, abs=0.01)
+    depth, color, info = (received[n][0] for n in ("/top_camera/depth/image_raw", "/top_camera/color/image_raw",
+                                                   "/top_camera/depth/camera_info"))
+    assert (depth.width, depth.height, depth.encoding) == (672, 376, "32FC1")
+    assert (color.width, color.height, color.encoding) == (672, 376, "rgb8")
+    assert received["/side_camera/image_raw"][0].width == 960 and received["/side_camera/image_raw"][0].height == 696
+    assert info.k[0] > 0 and info.header.frame_id == depth.header.frame_id == "top_camera_optical_frame"
+    belt = np.frombuffer(bytes(depth.data), np.float32).reshape(376, 672)[188, 336]
+    assert belt == pytest.approx(0.75, abs=0.002)  # the belt plane, metres from the camera
+    spawns = received["/line/ground_truth"]
+    assert len(spawns) >= 3 and len({s.fillet_id for s in spawns}) == len(spawns)
+    assert {s.lane for s in spawns} == {0, 1, 2} and all(s.stiffness in (0.0, 100.0) for s in spawns)
+
+
+def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_path):
+    from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
+
+    verdicts: list = []
+    commands: list = []
+    spawns: list = []
+    reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    ros_node.create_subscription(FilletVerdict, "/grading/verdicts", verdicts.append, reliable)
+    ros_node.create_subscription(GateCommand, "/reject_gate/commands", commands.append, reliable)
+    ros_node.create_subscription(FilletSpawn, "/line/ground_truth", spawns.append,
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    vision = {"use_sim_time": True, "lanes": 3}
+    nodes = [NodeProcess("segmenter", vision, domain_id=ros_domain, log_dir=tmp_path),
+             NodeProcess("grader", vision, domain_id=ros_domain, log_dir=tmp_path),
+             NodeProcess("reject_gate", {"use_sim_time": True}, domain_id=ros_domain, log_dir=tmp_path)]
+    # The line starts once the segmenter's tracks publisher and the grader's subscription are both up and have had
+    # a moment to match (the link is volatile: tracks sent before it are lost, and the first fillets with them).
+    spin_until(ros_node, lambda: ros_node.count_subscribers("/vision/tracks") >= 1
+               and ros_node.count_publishers("/vision/tracks") >= 1, timeout=60.0)
+    spin_until(ros_node, lambda: False, timeout=1.0)
+    nodes.append(NodeProcess("line_sim", {"fillets": 6, "duration_s": 5.5, "wait_for_subscribers": 1,
+                                          "max_lead_s": 0.1}, domain_id=ros_domain, log_dir=tmp_path))
+    try:
+        spin_until(ros_node, lambda: not nodes[-1].alive() or not all(n.alive() for n in nodes[:3]), timeout=240.0)
+        spin_until(ros_node, lambda: False, timeout=2.0)
+        assert all(n.alive() for n in nodes[:3]), "\n".join(n.log_tail() for n in nodes)
+    finally:
+        for node in nodes:
+            node.stop()
+    assert len(spawns) == 6
+    logs = "\n".join(f"--- {n.name}\n{n.log_tail(40)}" for n in nodes)
+    ids = [v.fillet_id for v in verdicts]
+    assert len(ids) == len(set(ids)), f"a fillet got two verdicts: {ids}"
+    assert len(verdicts) == 6, f"{len(verdicts)} verdicts for 6 fillets\n{logs}"
+    assert sorted(v.lane for v in verdicts) == sorted(s.lane for s in spawns)
+    scored = [v for v in verdicts if v.classification != FilletVerdict.CLASS_UNSCORED]
+    assert len(scored) >= 5, f"{[v.unscored_reason for v in verdicts]}\n{logs}"
+    assert all(np.isfinite(v.phi) and v.phi >= 0 for v in scored)
+    assert any(v.side_measured and np.isfinite(v.nmdm) for v in verdicts if v.lane == 1), "no side-view metrics"
+    woody = [v for v in verdicts if v.classification == FilletVerdict.CLASS_WOODY]
+    assert len(commands) == len(woody) and {c.fillet_id for c in commands} == {v.fillet_id for v in woody}
+
+
+def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_domain, tmp_path):
+    """16UC1 millimetre depth with 0 where nothing was measured, noisy colour, a few dropped frames at most."""
+    from geometry_msgs.msg import PoseStamped
+    from scipy.spatial.transform import Rotation
+    from sensor_msgs.msg import Image
+
+    frames: dict[str, list] = {"depth": [], "color": []}
+    best_effort = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)
+    for kind in frames:
+        ros_node.create_subscription(Image, f"/top_camera/{kind}/image_raw", frames[kind].append, best_effort)
+    poses: list = []
+    ros_node.create_subscription(PoseStamped, "/top_camera/pose", poses.append,
+                                 QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    sim = NodeProcess("line_sim", {"duration_s": 1.0, "wait_for_subscribers": 1, "side_rate_hz": 0.0,
+                                   "sensor": "structured_light"}, domain_id=ros_domain, log_dir=tmp_path)
+    try:
+        spin_until(ros_node, lambda: not sim.alive(), timeout=120.0)
+        spin_until(ros_node, lambda: False, timeout=1.0)
+    finally:
+        assert sim.stop() == 0, sim.log_tail()
+    assert 25 <= len(frames["depth"]) <= 31 and len(frames["color"]) == len(frames["depth"])
+    (pose,) = poses  # the camera 0.75 m over the belt, its optical axis (z) pointing down, image rows downstream
+    assert pose.header.frame_id == "world" and pose.pose.position.z == pytest.approx(0.75)
+    q = pose.pose.orientation
+    axes = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    assert np.allclose(axes[:, 2], [0, 0, -1]) and np.allclose(axes[:, 1], [1, 0, 0])
+    depth = frames["depth"][0]
+    assert depth.encoding == "16UC1" and depth.step == 672 * 2
+    mm = np.frombuffer(bytes(depth.data), np.uint16).reshape(376, 672)
+    assert 0.001 < (mm == 0).mean() < 0.1  # holes and edge bands
+    assert abs(int(np.median(mm[150:220, 300:370])) - 750) <= 3  # the belt, in millimetres
+    rgb = np.frombuffer(bytes(frames["color"][0].data), np.uint8).reshape(376, 672, 3)
+    assert np.std(rgb[150:220, 300:370].astype(float)) > 1.0  # pixel noise on the uniform belt
+
+
+def test_bad_parameters_are_refused_with_the_reason(tmp_path):
+    import subprocess
+
+    from woody_tools.processes import entry_point
+
+    cases = {
+        "line_sim": [("line_speed_fpm", "0.0", "line_speed_fpm"), ("lanes", "7", "lanes"),
+                     ("k_values", "[-1.0]", "k_values"), ("meshes", str(tmp_path / "none"), "none"),
+                     ("top_camera", "wide", "known: default, paper"), ("sensor", "lidar", "sensor 'lidar'")],
+        "segmenter": [("min_area_px", "0", "min_area_px"), ("image_qos", "fast", "image_qos")],
+        "grader": [("threshold", "-1.0", "threshold"), ("side_lane", "4", "side_lane")],
+        "reject_gate": [("gate_distance_m", "[0.5,0.6]", "gate_distance_m")],
+    }
+    for node, params in cases.items():
+        for name, value, mention in params:
+            result = subprocess.run([entry_point(node), "--ros-args", "-p", f"{name}:={value}"],
+                                    capture_output=True, text=True, timeout=60)
+            lines = [line for line in result.stderr.splitlines() if "pybullet build time" not in line]
+            assert result.returncode == 2, (node, name, result.stderr)
+            assert len(lines) == 1 and mention in lines[0] and "Traceback" not in result.stderr, (node, name, lines)
+
+
+def test_spawn_service_spawns_or_explains(ros_node, ros_domain, tmp_path):
+    from woody_msgs.srv import SpawnFillet
+
+    bad_mesh = tmp_path / "empty.obj"
+    bad_mesh.write_text("")
+    sim = NodeProcess("line_sim", {"realtime": True}, domain_id=ros_domain, log_dir=tmp_path)
+    client = ros_node.create_client(SpawnFillet, "/spawn_fillet")
+    try:
+        assert spin_until(ros_node, client.service_is_ready, timeout=60.0), sim.log_tail()
+        answers = []
+        for request in (SpawnFillet.Request(mesh="seed0001", stiffness=40.0, lane=2),
+                        SpawnFillet.Request(mesh=str(bad_mesh), stiffness=0.0, lane=0),
+                        SpawnFillet.Request(mesh="seed0001", stiffness=-5.0, lane=0),
+                        SpawnFillet.Request(mesh="seed0001", stiffness=0.0, lane=9)):
+            future = client.call_async(request)
+            assert spin_until(ros_node, future.done, timeout=20.0)
+            answers.append(future.result())
+    finally:
+        sim.stop()
+    assert answers[0].success and answers[0].message.startswith("spawned")
+    assert not answers[1].success and "empty.obj" in answers[1].message
+    assert not answers[2].success and "stiffness" in answers[2].message
+    assert not answers[3].success and "lane" in answers[3].message
+
+
+def test_line_sim_lays_each_mesh_turned_by_its_own_seeded_yaw(ros_node, ros_domain, tmp_path):
+    """yaw_sd_deg turns every mesh as the sweep's --yaw-sd does: its ground truth carries the turned footprint."""
+    from woody_msgs.msg import FilletSpawn
+    from woody_sim.meshes import load_mesh_set, mesh_yaw, yawed
+
+    truths: list = []
+    ros_node.create_subscription(FilletSpawn, "/line/ground_truth", truths.append,
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    sim = NodeProcess("line_sim", {"duration_s": 0.5, "wait_for_subscribers": 0, "yaw_sd_deg": 20.0},
+                      domain_id=ros_domain, log_dir=tmp_path)
+    try:
+        assert spin_until(ros_node, lambda: len(truths) >= 3, timeout=120.0), sim.log_tail()
+    finally:
+        assert sim.stop() == 0, sim.log_tail()
+    straight = {m.name: m for m in load_mesh_set("builtin")[0]}
+    for truth in truths:
+        turned = yawed(straight[truth.mesh], mesh_yaw(truth.mesh, 20.0))
+        assert mesh_yaw(truth.mesh, 20.0) != 0.0 and truth.length != pytest.approx(straight[truth.mesh].length)
+        assert (truth.length, truth.width) == pytest.approx((turned.length, turned.width), abs=1e-6)

@@ -1,0 +1,209 @@
+"""`woody run` end to end: bag, verdict table and report; a node that dies stops the run and the bag survives."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from woody_tools.processes import entry_point, lease_domain
+
+pytestmark = pytest.mark.ros
+"""Starts node entry points or `woody` as processes."""
+
+
+def _bag_messages(path):
+    from woody_bag.summary import bag_summary
+
+    return bag_summary(path)
+
+
+def test_woody_run_leaves_bag_table_and_report(tmp_path):
+    """Run in a namespace, as one of several lines in a domain would: everything lives under it."""
+    out = tmp_path / "run"
+    result = subprocess.run([entry_point("woody"), "run", "--fillets", "3", "--k", "0", "100", "--seed", "3",
+                             "--out", str(out), "--namespace", "line2"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    rows = list(csv.DictReader((out / "verdicts.csv").open()))
+    assert len(rows) == 3 and {r["lane"] for r in rows} == {"0", "1", "2"}
+    assert all(r["verdict"] in ("normal", "woody") and r["truth"] in ("normal", "woody") for r in rows)
+    assert list(rows[0])[:12] == ["fillet_id", "lane", "mesh", "k", "speed_fpm", "phi", "hu_term", "solidity_term",
+                                  "nmdm", "mdm", "be", "verdict"]
+    report = (out / "report.md").read_text()
+    assert "accuracy" in report and "Φ" in report
+    for png in ("phi_by_k_lane.png", "nmdm_by_k.png", "confusion.png"):
+        assert (out / png).stat().st_size > 1000
+    summary = _bag_messages(out / "line.mcap")
+    assert summary["complete"], summary
+    counts = {topic: info["count"] for topic, info in summary["topics"].items()}
+    assert all(topic.startswith("/line2/") for topic in counts), sorted(counts)
+    assert counts["/line2/grading/verdicts"] == 3 and counts["/line2/line/ground_truth"] == 3
+    assert counts["/line2/top_camera/depth/image_raw"] > 30 and counts["/line2/clock"] > 100
+    assert "fillet_id" in result.stdout and str(out / "line.mcap") in result.stdout
+    # the line's own pace, from its first /clock, apart from the nodes' start-up
+    assert re.search(r"\nthe line itself, after \d+\.\d s of node start-up: rtf \d+\.\d\dx\n", result.stdout)
+    report = subprocess.run([entry_point("woody"), "report", str(out / "line.mcap"), "--out", str(tmp_path / "again")],
+                            capture_output=True, text=True, timeout=120)
+    assert report.returncode == 0, report.stderr  # the namespaced bag's verdicts and ground truth are found
+    assert len((tmp_path / "again" / "verdicts.csv").read_text().splitlines()) == 4
+
+
+def test_a_dying_node_stops_the_run_and_the_bag_is_finalised(tmp_path):
+    out = tmp_path / "run"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    run = subprocess.Popen([entry_point("woody"), "run", "--fillets", "30", "--out", str(out)],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    log = out / "logs" / "segmenter.log"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and "calibration received" not in (log.read_text() if log.exists() else ""):
+        time.sleep(0.2)
+    time.sleep(2.0)
+    pids = subprocess.run(["pgrep", "-f", "bin/segmenter --ros-args"], capture_output=True, text=True).stdout.split()
+    mine = [p for p in pids if str(out) in _parent_cmdline(p)]
+    assert mine, f"segmenter of this run not found among {pids}"
+    os.kill(int(mine[0]), signal.SIGKILL)
+    stdout, stderr = run.communicate(timeout=120)
+    assert run.returncode == 1
+    assert "node 'segmenter' exited" in stderr
+    summary = _bag_messages(out / "line.mcap")
+    assert summary["complete"] and summary["topics"]["/top_camera/depth/image_raw"]["count"] > 0
+
+
+def _parent_cmdline(pid: str) -> str:
+    ppid = open(f"/proc/{pid}/stat").read().split(")")[1].split()[1]
+    return open(f"/proc/{ppid}/cmdline", "rb").read().replace(b"\0", b" ").decode(errors="replace")
+
+
+# ---------------------------------------------------------------- bad input (issue 14): one line, exit 2, nothing lost
+
+def woody_run(*args: str, env: dict | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([entry_point("woody"), "run", *args], capture_output=True, text=True, timeout=timeout,
+                          env=env)
+
+
+@pytest.fixture
+def other_run_holds(tmp_path):
+    """Play the part of another `woody run`: hold its --out folder lock or its exported domain's lease."""
+    import fcntl
+
+    held = []
+
+    def hold(kind: str, value: str):
+        if kind == "out":
+            Path(value).mkdir(parents=True, exist_ok=True)
+            handle = open(Path(value) / ".woody-run.lock", "w")
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            held.append(handle)
+        else:  # a free domain, held the way a running `woody run` holds it
+            held.append(lease_domain({}))
+            return held[-1].domain_id
+
+    yield hold
+    for item in held:
+        item.close() if hasattr(item, "close") else item.release()
+
+
+@pytest.mark.parametrize("setup,args,message", [
+    (None, ["--k", "0", "nan"], "--k values must be finite and >= 0, got 0 nan"),
+    (None, ["--speed-fpm", "0.5"], "--speed-fpm must be in [1, 400], got 0.5"),
+    (None, ["--duration", "-1"], "--duration must be in (0, 1e+06] sim seconds, got -1"),
+    (None, ["--side-rate", "500"], "--side-rate must be in [0, 400] Hz (0: no side camera), got 500"),
+    (None, ["--out", "/proc/woody/run"], "--out /proc/woody/run: cannot write there"),
+    ("existing", ["--out", "{tmp}/run"], "already holds a run (line.mcap); pass --force"),
+    ("locked", ["--out", "{tmp}/run"], "is in use by another woody run"),
+    ("domain", ["--out", "{tmp}/run"], "ROS_DOMAIN_ID={domain} (exported) is in use by another woody run"),
+    ("garbage", ["--meshes", "{tmp}/meshes"], "no loadable mesh ({tmp}/meshes/a.stl: not a valid STL"),
+    (None, ["--meshes", "generated:x"], "--meshes: mesh spec 'generated:x'"),
+])
+def test_bad_run_input_is_refused_with_one_line(tmp_path, other_run_holds, setup, args, message):
+    env = dict(os.environ)
+    if setup == "existing":
+        (tmp_path / "run").mkdir()
+        (tmp_path / "run" / "line.mcap").write_bytes(b"a recording worth keeping")
+    elif setup == "locked":
+        other_run_holds("out", str(tmp_path / "run"))
+    elif setup == "domain":
+        env["ROS_DOMAIN_ID"] = str(other_run_holds("domain", ""))
+    elif setup == "garbage":
+        (tmp_path / "meshes").mkdir()
+        (tmp_path / "meshes" / "a.stl").write_bytes(bytes(300))
+    args = args if "--out" in args else [*args, "--out", "{tmp}/default"]
+    count = [] if "--duration" in args else ["--fillets", "1"]
+    result = woody_run(*count, *[a.format(tmp=tmp_path) for a in args], env=env)
+    assert result.returncode == 2, result.stderr
+    lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
+    expected = message.format(tmp=tmp_path, domain=env.get("ROS_DOMAIN_ID"))
+    assert len(lines) == 1 and lines[0].startswith("woody run: ") and expected in lines[0], lines
+    if setup == "existing":
+        assert (tmp_path / "run" / "line.mcap").read_bytes() == b"a recording worth keeping"
+    assert not (tmp_path / "default").exists()  # a refused run writes nothing
+
+
+def test_awkward_paths_mesh_problems_and_settings_survive_a_run(tmp_path):
+    """A folder with '#' and ': ' in its name, an exported ROS_DOMAIN_ID, a scan in mm and a broken STL:
+    the bag lands where it was asked to, every skipped or converted mesh is named in the terminal and the
+    report, every node closes with its summary and no traceback, and `woody report BAG` rebuilds the
+    settings table from the bag alone."""
+    import trimesh
+
+    from woody_bag.summary import bag_metadata
+    from woody_sim.meshes import BUILTIN_DIR
+
+    meshes = tmp_path / "scans"
+    meshes.mkdir()
+    raw = trimesh.load(BUILTIN_DIR / "seed0001.obj", force="mesh", process=False)
+    trimesh.Trimesh(raw.vertices * 1000.0, raw.faces, process=False).export(meshes / "scan_mm.stl")
+    (meshes / "broken.stl").write_bytes(bytes(1000))
+    out = tmp_path / "run #1: line"
+    with lease_domain({}) as lease:  # free now; exported below as a user's .bashrc would
+        domain = lease.domain_id
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    result = woody_run("--fillets", "3", "--meshes", str(meshes), "--out", str(out), env=env, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    for text in (result.stdout, (out / "report.md").read_text()):
+        assert f"skipped mesh {meshes / 'broken.stl'}: not a valid STL" in text
+        assert f"converted mesh {meshes / 'scan_mm.stl'}: " in text and "taken as mm" in text
+    assert f"bag: {out / 'line.mcap'}\n" in result.stdout and f"ROS_DOMAIN_ID={domain}," in result.stdout
+    logs = {log.stem: log.read_text() for log in (out / "logs").glob("*.log")}
+    summaries = {"line_sim": "stopped at sim time", "segmenter": "depth frames received",
+                 "grader": "published 3 verdicts", "reject_gate": "[reject_gate] diverted", "recorder": "MB on disk"}
+    for node, summary in summaries.items():
+        assert "Traceback" not in logs[node] and logs[node].count(summary) == 1, (node, logs[node][-2000:])
+    assert "written/published per topic: /clock " in logs["recorder"]
+    settings = json.loads(bag_metadata(out / "line.mcap")["woody"]["run_settings"])
+    assert settings["meshes"] == str(meshes) and settings["fillets requested"] == 3
+
+    again = subprocess.run([entry_point("woody"), "report", str(out / "line.mcap"), "--out", str(tmp_path / "re")],
+                           capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0, again.stderr
+    rebuilt = (tmp_path / "re" / "report.md").read_text()
+    assert f"| meshes | {meshes} |" in rebuilt and "| fillets spawned | 3 |" in rebuilt
+    assert woody_run("--fillets", "1", "--out", str(out)).returncode == 2  # never overwritten without --force
+
+
+def test_a_run_on_an_exported_domain_with_other_nodes_refuses(tmp_path):
+    """Another program (not a woody run, so no lock) already on the user's ROS_DOMAIN_ID: refused, nothing written."""
+    import rclpy
+
+    with lease_domain({}) as lease:  # a domain no test uses, then unlocked as a user's domain would be
+        ros_domain = lease.domain_id
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=ros_domain)
+    node = rclpy.create_node("someone_elses_node", context=context)
+    try:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
+        result = woody_run("--fillets", "1", "--out", str(tmp_path / "run"), env=env)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
+    assert len(lines) == 1 and "already has nodes (/someone_elses_node)" in lines[0], lines
+    assert not (tmp_path / "run").exists()
