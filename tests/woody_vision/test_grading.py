@@ -6,7 +6,8 @@ import math
 
 import pytest
 
-from woody_vision.grading import GradingRules
+from woody_common.line import REFERENCE_SPEED_MPS
+from woody_vision.grading import TIDY, Cut, FilletConditions, GradingRules
 
 
 def test_grading_rules_classify_lower_phi_as_woody():
@@ -33,3 +34,27 @@ def test_grading_rules_classify_lower_phi_as_woody():
 def test_grading_rules_are_validated(kwargs):
     with pytest.raises(ValueError):
         GradingRules(**kwargs)
+
+
+def test_a_cut_follows_the_measured_speed_and_leading_end():
+    cut = Cut(8.0, speed_slope=-1.5, blunt_offset=-0.2)
+    assert cut.at(TIDY) == pytest.approx(8.0)
+    assert cut.at(FilletConditions(REFERENCE_SPEED_MPS + 0.2)) == pytest.approx(8.0 * math.exp(-0.3))
+    assert cut.at(FilletConditions(blunt_first=True)) == pytest.approx(8.0 * math.exp(-0.2))
+    assert cut.at(FilletConditions(math.nan)) == pytest.approx(8.0)  # speed unknown: the base
+    assert Cut.of(5.0) == Cut(5.0) and Cut.of([5.0, 1.0, 0.5]).as_list() == [5.0, 1.0, 0.5]
+    rules = GradingRules(cut)
+    fast = FilletConditions(REFERENCE_SPEED_MPS + 0.2)
+    assert rules.is_woody(7.0) and not rules.is_woody(7.0, fast)  # the cut falls with speed: 7 is normal there
+    assert rules.classify(7.0, fast).threshold == pytest.approx(cut.at(fast))
+
+
+@pytest.mark.parametrize("value", [[1.0, 2.0], [0.0, 0.0, 0.0], [5.0, math.nan, 0.0], "5"])
+def test_malformed_cuts_are_refused(value):
+    with pytest.raises(ValueError):
+        Cut.of(value)
+
+
+def test_the_grade_cuts_must_stay_ordered_for_either_leading_end():
+    with pytest.raises(ValueError, match="severe_threshold"):
+        GradingRules(Cut(8.0), Cut(10.0), Cut(6.0, blunt_offset=1.0))  # blunt first: severe 16 > moderate 10

@@ -17,6 +17,9 @@ from woody_common.line import TOP_CAMERA_HEIGHT_M
 from woody_vision.camera_model import LaneLayout
 from woody_vision.segmentation import segment_depth
 from woody_vision.shape_score import (
+    LEADING_BLUNT,
+    LEADING_NARROW,
+    LINE_OVERHANG_FRACTION,
     REASON_LOST_BEFORE_EDGE,
     REASON_LOST_IN_WINDOW,
     REASON_STARTED_PAST_EDGE,
@@ -27,6 +30,7 @@ from woody_vision.shape_score import (
     clip_body,
     fill_rows,
     leading_cut_rows,
+    leading_end,
     make_reference,
     shape_terms,
     solidity,
@@ -320,3 +324,79 @@ def test_evaluator_options_are_validated():
         ShapeEvaluator(EDGE, reference_margin_px=-1.0)
     with pytest.raises(ValueError):
         ShapeEvaluator(EDGE, tip_ratio=0.0)
+
+
+# ------------------------------------------------------------------ the line score
+
+
+def drooping(points: np.ndarray) -> np.ndarray:
+    """A compliant fillet: the farther its body overhangs, the more the overhang is foreshortened (continuously)."""
+    overhang = max(0.0, points[:, 1].max() - EDGE)
+    return foreshorten(1.0 - 0.6 * min(1.0, overhang / 80.0))(points)
+
+
+def flipped(points: np.ndarray) -> np.ndarray:
+    """The same teardrop sent blunt end first (turned 180 degrees about its centre)."""
+    centre = (points.max(axis=0) + points.min(axis=0)) / 2.0
+    return 2.0 * centre - points
+
+
+def test_line_phi_does_not_depend_on_where_the_frames_fall_on_the_ramp():
+    results = []
+    for phase in np.linspace(0.0, 7.0, 8):  # the same fillet, frames falling 0..7 px (of an 8 px step) later
+        _, result, _ = run_evaluator(translating(40, start_lead_v=100.0 + phase, step=8.0, bend=drooping))
+        results.append(result)
+    assert all(r.status == STATUS_SCORED for r in results)
+    phis = [r.phi for r in results]
+    lines = [r.line_phi for r in results]
+    assert np.ptp(lines) < 0.25 * np.ptp(phis) and np.ptp(phis) > 1.0
+    assert all(r.leading_end == LEADING_NARROW and r.rejected_frames == 0 for r in results)
+
+
+def test_a_blunt_first_fillet_is_measured_at_the_same_overhang_after_its_window_closes():
+    contours = [polygon_contour(flipped(c.astype(float))) for c in translating(120)]
+    closes, result, _ = run_evaluator([polygon_contour(drooping(c.astype(float))) for c in contours])
+    assert result.status == STATUS_SCORED and result.leading_end == LEADING_BLUNT
+    assert result.extra_trace and result.extra_trace[-1].overhang >= LINE_OVERHANG_FRACTION
+    assert result.trace[-1].overhang < LINE_OVERHANG_FRACTION  # the paper's window closed before half overhung
+    assert leading_end(contours[0]) == LEADING_BLUNT and leading_end(translating(1)[0]) == LEADING_NARROW
+
+
+def merged_with_follower(contour: np.ndarray, gap_px: int = 0) -> np.ndarray:
+    """The blob of a fillet and an identical follower touching it from behind, as one contour."""
+    mask = np.zeros((800, 800), np.uint8)
+    length = int(np.ptp(contour[:, 1]))
+    cv2.fillPoly(mask, [contour, contour - (0, length - gap_px)], 255)
+    outline, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    return max(outline, key=cv2.contourArea).reshape(-1, 2)
+
+
+def test_a_window_frame_merged_with_the_follower_is_rejected_not_scored():
+    contours = translating(90, bend=drooping)
+    _, plain, _ = run_evaluator(contours)
+    opens = round(plain.trace[0].stamp * FPS)
+    crowded = list(contours)
+    crowded[opens + 2] = merged_with_follower(contours[opens + 2])
+    _, result, _ = run_evaluator(crowded)
+    assert result.rejected_frames == 1 and result.frames == plain.frames - 1
+    assert result.phi == pytest.approx(plain.phi) and result.line_phi == pytest.approx(plain.line_phi)
+
+
+def test_a_fillet_merged_at_its_measuring_point_is_unscored_with_the_reason():
+    contours = translating(90, bend=drooping)
+    closes, plain, _ = run_evaluator(contours)
+    crowded = [merged_with_follower(c) if closes - 3 <= i < closes else c for i, c in enumerate(contours)]
+    _, result, _ = run_evaluator(crowded)
+    assert result.status == STATUS_UNSCORED and result.rejected_frames == 3
+    assert result.reason.startswith("no clean frames around the measuring point")
+
+
+def test_the_reference_skips_a_flat_frame_merged_with_a_neighbour():
+    contours = translating(90)
+    _, plain, _ = run_evaluator(contours)
+    reference_index = round(plain.reference_stamp * FPS)
+    crowded = list(contours)
+    crowded[reference_index] = merged_with_follower(contours[reference_index])
+    _, result, _ = run_evaluator(crowded)
+    assert result.reference_stamp == pytest.approx((reference_index - 1) / FPS)
+    assert result.status == STATUS_SCORED and result.phi == pytest.approx(plain.phi, abs=0.5)
