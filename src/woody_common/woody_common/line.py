@@ -18,7 +18,22 @@ MAX_SPAWN_DURATION_S = 1e6
 
 LANES = 3
 LANE_PITCH_M = 0.16
-"""Distance between lane centres across the belt."""
+"""Distance between lane centres across the belt (the default of line_sim's and the segmenter's lane_pitch_m)."""
+MIN_LANE_PITCH_M = 0.08
+"""Closest lanes line_sim accepts: the narrowest fillets (0.094 m wide) at the smallest size (x0.85) touch
+their neighbours side by side there; wider fillets overlap them (fillets do not collide)."""
+BELT_MARGIN_M = 0.08
+"""Belt width beyond the outer lane centres' pitch, each side."""
+MAX_BELT_WIDTH_M = 1.2
+"""Widest belt (lanes x pitch + both margins) accepted: a wide processing-line belt, within the default top
+camera's 1.37 m view across the belt."""
+
+MIN_SPAWN_SPACING_M = 0.15
+"""Closest in-lane spacing (belt distance between consecutive fillets' spawns) line_sim accepts: the shortest
+meshes (0.17 m) at the smallest messy size (x0.85) touch end to end there; the builtin meshes (0.18-0.19 m)
+touch at their length and the longest generated one at the largest size (0.208 m x 1.15) at 0.24 m. Closer
+spacing overlaps every fillet (fillets do not collide), so it is refused."""
+MAX_SPAWN_SPACING_M = 10.0
 
 TOP_CAMERA_HEIGHT_M = 0.75
 """Default top camera: nadir, this high above the belt."""
@@ -34,6 +49,33 @@ SIDE_ROLLER_RADIUS_PX = 48.0
 def fpm_to_mps(speed_fpm: float) -> float:
     """Convert the user-facing line speed in feet per minute to m/s."""
     return float(speed_fpm) * FPM_TO_MPS
+
+
+def belt_width_m(lanes: int, lane_pitch_m: float) -> float:
+    """Width of a belt carrying ``lanes`` lanes ``lane_pitch_m`` apart."""
+    return lanes * float(lane_pitch_m) + 2.0 * BELT_MARGIN_M
+
+
+def check_lane_pitch(lanes: int, lane_pitch_m: float) -> float:
+    """The lane pitch if ``lanes`` lanes that far apart fit the widest belt, else one ValueError line."""
+    pitch = float(lane_pitch_m)
+    if not MIN_LANE_PITCH_M <= pitch:
+        raise ValueError(f"lane pitch must be at least {MIN_LANE_PITCH_M:g} m, got {lane_pitch_m!r}")
+    if belt_width_m(lanes, pitch) > MAX_BELT_WIDTH_M + 1e-9:
+        widest = (MAX_BELT_WIDTH_M - 2.0 * BELT_MARGIN_M) / lanes
+        raise ValueError(f"{lanes} lanes {pitch:g} m apart need a {belt_width_m(lanes, pitch):.3f} m belt, wider "
+                         f"than {MAX_BELT_WIDTH_M:g} m: use a lane pitch of at most {widest:.3f} m")
+    return pitch
+
+
+def spacing_at_rate(speed_mps: float, fillets_per_minute: float) -> float:
+    """In-lane spacing (m) of fillets spawned ``fillets_per_minute`` per lane on a belt at ``speed_mps``."""
+    return 60.0 * float(speed_mps) / float(fillets_per_minute)
+
+
+def max_fillets_per_minute(speed_mps: float) -> float:
+    """Highest spawn rate per lane that keeps MIN_SPAWN_SPACING_M at this belt speed."""
+    return 60.0 * float(speed_mps) / MIN_SPAWN_SPACING_M
 
 
 REFERENCE_SPEED_FPM = 100.0

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from woody_common.line import LANE_PITCH_M, LANES, TOP_CAMERA_HEIGHT_M, TOP_EDGE_OFFSET_M
+from woody_common.line import BELT_MARGIN_M, LANE_PITCH_M, LANES, TOP_CAMERA_HEIGHT_M, TOP_EDGE_OFFSET_M
 
 TOP_CAMERA_PRESETS: dict[str, dict[str, float | int]] = {
     "default": {},
@@ -86,7 +86,7 @@ class LineGeometry:
     roller_radius: float = 0.0207
     """The seed system's end roller: 48 px at its side camera's 0.431 mm/px (seed-system.md, Cameras)."""
     belt_length: float = 1.4
-    belt_margin: float = 0.08
+    belt_margin: float = BELT_MARGIN_M
     """Extra belt width beyond the outer lanes, each side."""
     floor_z: float = -0.6
     """The catch floor below the roller: what the top camera sees past the edge."""

@@ -33,6 +33,13 @@ Choices that are not pybullet defaults (measurements in docs/physics.md):
   kinematic translation until its leading end is ``activation_margin`` from
   the roller edge, and only then becomes a pybullet chain (flat, at line
   speed). ``activation_margin = None`` simulates the whole belt run.
+* **Fillets do not collide with one another**, only with the conveyor and
+  floor: on a crowded line they may touch or overlap, and two fillets in the
+  two worlds of :mod:`woody_sim.split_world` could not push each other anyway.
+* **One belt speed for all.** :meth:`LineWorld.change_speed` sets, from a
+  given step, the speed the belt carries every fillet at: riding fillets
+  continue analytically from where the old speed brought them, chains are
+  driven towards the new speed.
 """
 
 from __future__ import annotations
@@ -65,6 +72,10 @@ PAST_ROLLER_X = 1.5
 """A fillet whose centre of mass is this far (m) downstream of the roller edge has left the line."""
 DYNAMIC_TIMEOUT = 10.0
 """A chain still on the line this long (s) after leaving the belt fast path is removed (stuck), so runs stay bounded."""
+FILLET_COLLISION_GROUP = 4
+"""Collision filter group of fillet chains; their mask leaves it out, so chains touch only the conveyor and floor
+(pybullet's default groups 1 and 2)."""
+FILLET_COLLISION_MASK = 3
 BLOWUP_SPEED = 12.0
 """m/s no segment reaches on this line (free fall past the roller stays under ~4 m/s): faster is a numerical blow-up."""
 
@@ -128,7 +139,11 @@ class _Fillet:
     mesh: FilletMesh
     model: FilletModel
     origin: np.ndarray
-    """Fillet-frame origin in the world at spawn time (kinematic phase: moves at line speed)."""
+    """Fillet-frame origin in the world at ``ride_start`` (kinematic phase: moves at ``speed`` from there)."""
+    speed: float
+    """Belt speed (m/s) carrying the fillet now: its spawn speed until the belt speed changes."""
+    ride_start: float
+    """Sim time at which the fillet was at ``origin``: its spawn, or the last belt speed change since."""
     body: int = -1
     activation_time: float = math.inf
     state: np.ndarray = field(default_factory=lambda: np.zeros((0, 13)))
@@ -202,6 +217,10 @@ class LineWorld:
         self._models: dict[FilletMesh, FilletModel] = {}
         self._shapes: dict[FilletMesh, list[int]] = {}
         self._next_id = 0
+        self._speed_changes: list[tuple[float, float]] = []
+        """(sim time, belt speed m/s) to apply at the first step at or after that time, soonest first."""
+        self._speed_history: list[tuple[float, float]] = []
+        """(sim time, belt speed m/s) of the changes applied, for fillets spawned in the past (a worker world)."""
         p.setGravity(0.0, 0.0, -9.81, physicsClientId=self._client)
         p.setPhysicsEngineParameter(
             fixedTimeStep=self.config.dt,
@@ -260,28 +279,39 @@ class LineWorld:
             self._models[mesh] = build_fillet_model(mesh, self.config.n_segments, NOMINAL_MASS)
         return self._models[mesh]
 
+    def release(self, mesh: FilletMesh) -> None:
+        """Forget the chain model built for a mesh no later spawn uses (a placed fillet's own mesh); pybullet
+        keeps its collision shapes, as it cannot free a shape a body has used."""
+        self._models.pop(mesh, None)
+        self._shapes.pop(mesh, None)
+
     def spawn(
         self, mesh: FilletMesh, k: float, lane: int, mass: float, speed_mps: float, fillet_id: int | None = None,
-        spawn_time: float | None = None,
+        spawn_time: float | None = None, lateral_offset: float = 0.0,
     ) -> int:
         """Place a fillet flat on the belt at ``geometry.spawn_x`` in ``lane``, already moving at line speed.
 
         ``k`` is the hinge stiffness (N m / rad), ``mass`` the total chain mass M
-        (kg), ``speed_mps`` the line speed. Returns the fillet's id:
+        (kg), ``speed_mps`` the line speed, ``lateral_offset`` (m, along +y) its
+        centre from the lane centre. Returns the fillet's id:
         ``fillet_id`` if given (it must not be live), else one never used before.
         ``spawn_time`` (at most now) places a fillet that entered earlier where the
         belt has carried it since: exact, because a fillet moves analytically until
         it nears the roller (a worker world hears of its spawns a few steps late).
         """
         k, lane, mass, speed = check_spawn(self.geometry, k, lane, mass, speed_mps)
+        offset = check_lateral_offset(lateral_offset)
         fillet_id = check_fillet_id(self._next_id if fillet_id is None else fillet_id, self._fillets)
         spawn_time = self._check_spawn_time(spawn_time)
         self._next_id = max(self._next_id, fillet_id + 1)
         model = self.model_for(mesh).with_mass(mass)
         info = FilletInfo(fillet_id, lane, mesh.name, k, mass, speed, spawn_time)
-        origin = np.array([self.geometry.spawn_x, self.geometry.lane_y(lane), 0.0])
-        fillet = _Fillet(info=info, mesh=mesh, model=model, origin=origin, drive=np.zeros((model.n_segments, 3)),
-                         normal_force=np.zeros(model.n_segments))
+        origin = np.array([self.geometry.spawn_x, self.geometry.lane_y(lane) + offset, 0.0])
+        fillet = _Fillet(info=info, mesh=mesh, model=model, origin=origin, speed=speed, ride_start=spawn_time,
+                         drive=np.zeros((model.n_segments, 3)), normal_force=np.zeros(model.n_segments))
+        for at, new_speed in self._speed_history:  # changes applied since a past spawn_time (a worker world)
+            if at >= spawn_time - 1e-9:
+                self._ride_on(fillet, at, new_speed)
         self._fillets[fillet_id] = fillet
         self._kinematic_state(fillet)
         if self.config.activation_margin is None:
@@ -297,15 +327,43 @@ class LineWorld:
             raise ValueError(f"spawn_time must be within 0..{self.time} s (now), got {spawn_time}")
         return float(spawn_time)
 
+    def change_speed(self, speed_mps: float, at_time: float | None = None) -> None:
+        """From the first step at or after sim time ``at_time`` (default: now) the belt carries every fillet on it
+        at ``speed_mps``; fillets spawned later ride at the speed they are spawned with."""
+        speed = _check_speed(speed_mps)
+        at = self.time if at_time is None else float(at_time)
+        if not at >= self.time - 1e-9:
+            raise ValueError(f"a belt speed change must come at or after now ({self.time} s), got {at_time!r}")
+        self._speed_changes.append((at, speed))
+        self._speed_changes.sort(key=lambda change: change[0])
+
+    def _apply_speed_changes(self) -> None:
+        while self._speed_changes and self._speed_changes[0][0] <= self.time + 1e-9:
+            _, speed = self._speed_changes.pop(0)
+            for fillet in self._fillets.values():
+                self._ride_on(fillet, self.time, speed)
+            self._speed_history.append((self.time, speed))
+
+    @staticmethod
+    def _ride_on(fillet: _Fillet, at: float, speed: float) -> None:
+        """From sim time ``at`` the belt carries the fillet at ``speed``: a riding fillet's analytic motion
+        restarts there from where the old speed brought it; a chain's drive pulls towards the new speed."""
+        if fillet.body < 0:
+            fillet.origin[0] += fillet.speed * (at - fillet.ride_start)
+            fillet.ride_start = at
+            if fillet.state.shape[0]:
+                fillet.state[:, 7] = speed
+        fillet.speed = speed
+
     def _kinematic_state(self, fillet: _Fillet) -> None:
-        """Flat pose translated at line speed since spawn (the exact flat-belt motion); only x changes per step."""
-        shift = fillet.info.speed_mps * (self.time - fillet.info.spawn_time)
+        """Flat pose translated at belt speed since ``ride_start`` (the exact flat-belt motion); only x changes."""
+        shift = fillet.speed * (self.time - fillet.ride_start)
         x = fillet.origin[0] + shift + fillet.model.box_centers[:, 0]
         if fillet.state.shape[0] != fillet.model.n_segments:
             fillet.state = np.zeros((fillet.model.n_segments, 13))
             fillet.state[:, 1:3] = fillet.origin[1:] + fillet.model.box_centers[:, 1:]
             fillet.state[:, 6] = 1.0
-            fillet.state[:, 7] = fillet.info.speed_mps
+            fillet.state[:, 7] = fillet.speed
         fillet.state[:, 0] = x
 
     def _leading_x(self, fillet: _Fillet) -> float:
@@ -375,7 +433,10 @@ class LineWorld:
         p.setJointMotorControlArray(
             body, list(range(n - 1)), p.VELOCITY_CONTROL, forces=[0.0] * (n - 1), physicsClientId=c
         )
-        p.resetBaseVelocity(body, [fillet.info.speed_mps, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=c)
+        for link in range(-1, n - 1):
+            p.setCollisionFilterGroupMask(body, link, FILLET_COLLISION_GROUP, FILLET_COLLISION_MASK,
+                                          physicsClientId=c)
+        p.resetBaseVelocity(body, [fillet.speed, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=c)
         fillet.body = body
         fillet.activation_time = self.time
         self._read_state(fillet)
@@ -420,6 +481,7 @@ class LineWorld:
         """Advance one physics step of ``config.dt``; returns the sim time."""
         cfg = self.config
         margin = cfg.activation_margin
+        self._apply_speed_changes()
         for fillet in self._fillets.values():
             if fillet.body < 0 and margin is not None and self._leading_x(fillet) >= -margin:
                 self._activate(fillet)
@@ -478,7 +540,7 @@ class LineWorld:
         for fillet in dynamic:
             mine = rows[rows[:, 0] == fillet.body]
             belt_drive(mine[:, 1].astype(np.int64), mine[:, 2:], fillet.state[:, 7:10], fillet.model.masses,
-                       fillet.info.speed_mps, cfg.dt, blend, cfg.friction_static, cfg.friction_dynamic,
+                       fillet.speed, cfg.dt, blend, cfg.friction_static, cfg.friction_dynamic,
                        fillet.normal_force, fillet.drive)
 
     def _read_state(self, fillet: _Fillet) -> None:
@@ -540,13 +602,26 @@ def check_spawn(geometry: LineGeometry, k: float, lane: int, mass: float, speed_
     mass = _check_positive_finite("mass", mass)
     if mass > MAX_MASS:
         raise ValueError(f"mass must be at most {MAX_MASS} kg, got {mass}")
-    speed = _check_positive_finite("speed", speed_mps)
-    if speed > MAX_SPEED_MPS:
-        raise ValueError(f"speed must be at most {MAX_SPEED_MPS} m/s (is it in FPM?), got {speed}")
+    speed = _check_speed(speed_mps)
     if isinstance(lane, bool) or not isinstance(lane, (int, np.integer)):
         raise ValueError(f"lane must be an integer, got {lane!r}")
     geometry.lane_y(int(lane))  # raises for a lane the line does not have
     return k, int(lane), mass, speed
+
+
+def _check_speed(speed_mps: float) -> float:
+    speed = _check_positive_finite("speed", speed_mps)
+    if speed > MAX_SPEED_MPS:
+        raise ValueError(f"speed must be at most {MAX_SPEED_MPS} m/s (is it in FPM?), got {speed}")
+    return speed
+
+
+def check_lateral_offset(lateral_offset: float) -> float:
+    """The offset (m) of a fillet from its lane centre as a number, or a ValueError."""
+    offset = float(lateral_offset)
+    if not math.isfinite(offset):
+        raise ValueError(f"lateral offset must be a finite number of metres, got {lateral_offset!r}")
+    return offset
 
 
 def check_fillet_id(fillet_id: int, live: Container[int]) -> int:

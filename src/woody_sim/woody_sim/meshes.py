@@ -267,6 +267,17 @@ def yawed(fillet: FilletMesh, degrees: float) -> FilletMesh:
     return FilletMesh(name=fillet.name, mesh=_centre(mesh), source=f"{fillet.source}@yaw{float(degrees):+.1f}")
 
 
+def scaled(fillet: FilletMesh, factor: float) -> FilletMesh:
+    """The fillet ``factor`` times the size in every direction, re-centred (its volume, and so its mass at a
+    given density, times factor**3)."""
+    factor = float(factor)
+    if not (math.isfinite(factor) and factor > 0.0):
+        raise ValueError(f"scale must be a positive finite number, got {factor!r}")
+    mesh = fillet.mesh.copy()
+    mesh.apply_scale(factor)
+    return FilletMesh(name=fillet.name, mesh=_centre(mesh), source=f"{fillet.source}@x{factor:.3f}")
+
+
 MAX_YAW_SD_DEG = 45.0
 """Widest yaw spread accepted: wider, fillets would lie across the belt rather than turned on it."""
 
@@ -274,7 +285,8 @@ MAX_YAW_SD_DEG = 45.0
 def mesh_yaw(name: str, sd_deg: float) -> float:
     """How far the mesh called ``name`` lies turned on the belt for a yaw spread ``sd_deg``: ``sd_deg`` times a
     normal draw seeded by the name, so a mesh lies the same way at every k and speed, in a sweep and on the
-    line, and in every rerun (0 for ``sd_deg`` 0)."""
+    line, and in every rerun (0 for ``sd_deg`` 0). The sweep's and calibrate's turn; line_sim draws a turn per
+    fillet instead (:mod:`woody_sim.line_conditions`)."""
     if not 0.0 <= sd_deg <= MAX_YAW_SD_DEG:
         raise ValueError(f"yaw spread must be within 0..{MAX_YAW_SD_DEG:g} degrees, got {sd_deg!r}")
     if not sd_deg:

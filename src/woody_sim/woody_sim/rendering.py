@@ -514,6 +514,8 @@ def _child_main(conn: mpc.Connection, geometry: LineGeometry, flags: tuple[bool,
                 renderer._add_checked(fid, lane, shapes[key], color)
             elif op == "remove":
                 renderer._fillets.pop(msg[1], None)
+            elif op == "forget":
+                shapes.pop(msg[1], None)
             elif op == "render":
                 _, slot, poses, want_top, want_side = msg
                 t0 = time.perf_counter()
@@ -636,6 +638,12 @@ class RenderProcess:
         del self._known[fid]
         del self._lanes[fid]
         del self._radii[fid]
+
+    def release(self, visuals: Sequence[Any]) -> None:
+        """Forget visuals no later fillet uses (a placed fillet's own), here and in the child."""
+        key = id(visuals)
+        if self._shapes.pop(key, None) is not None:
+            self._send(("forget", key))
 
     def side_view_occupied(self, poses: Mapping[int, np.ndarray]) -> bool:
         """Whether a fillet of the watched lane may show in the side camera's image (else the frame is the

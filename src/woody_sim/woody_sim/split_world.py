@@ -11,6 +11,8 @@ the next one, both worlds step at once until then, and :meth:`SplitLineWorld.seg
 waits for the worker. Spawns reach the worker a few steps late and are placed where the belt has carried
 them since (exact: a fillet moves analytically until it nears the roller). Fillets the worker removes are
 reported with its poses, so :meth:`SplitLineWorld.take_removed` names them after the next pose request.
+A belt speed change is sent to both worlds before the worker can have passed its step, so both apply it at
+the same step.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from woody_sim.child_process import ChildProcess, parent_messages
 from woody_sim.fillet_model import FilletModel
 from woody_sim.frame_schedule import DUE_SLACK
 from woody_sim.line_geometry import LineGeometry
-from woody_sim.line_world import LineWorld, PhysicsConfig, check_fillet_id, check_spawn
+from woody_sim.line_world import LineWorld, PhysicsConfig, check_fillet_id, check_lateral_offset, check_spawn
 from woody_sim.meshes import FilletMesh
 
 
@@ -74,19 +76,38 @@ class SplitLineWorld:
             self._worker.send(("mesh", key, mesh))
         return key
 
+    def release(self, mesh: FilletMesh) -> None:
+        """As :meth:`LineWorld.release <woody_sim.line_world.LineWorld.release>`, in both worlds."""
+        self._local.release(mesh)
+        key = self._mesh_keys.pop(mesh, None)
+        if key is not None:
+            self._worker.send(("release", key))
+
+    def change_speed(self, speed_mps: float, at_time: float | None = None) -> None:
+        """As :meth:`LineWorld.change_speed <woody_sim.line_world.LineWorld.change_speed>`; ``at_time`` may
+        not come before a step the worker has been sent on to (call it before :meth:`plan` passes it)."""
+        at = self.time if at_time is None else float(at_time)
+        if at < self._asked * self.config.dt - 1e-9:
+            raise ValueError(f"the physics worker may have stepped past {at} s already (up to "
+                             f"{self._asked * self.config.dt} s): change the belt speed earlier")
+        self._local.change_speed(speed_mps, at)
+        self._worker.send(("speed", float(speed_mps), at))
+
     def spawn(self, mesh: FilletMesh, k: float, lane: int, mass: float, speed_mps: float,
-              fillet_id: int | None = None) -> int:
+              fillet_id: int | None = None, lateral_offset: float = 0.0) -> int:
         """As :meth:`LineWorld.spawn <woody_sim.line_world.LineWorld.spawn>`; every other fillet goes to the
         worker."""
         k, lane, mass, speed = check_spawn(self.geometry, k, lane, mass, speed_mps)
+        lateral_offset = check_lateral_offset(lateral_offset)
         live = self._remote_models.keys() | self._local.fillets.keys()
         fillet_id = check_fillet_id(self._next_id if fillet_id is None else fillet_id, live)
         if self._spawned % 2:
             self._send_to(self.steps)  # the worker must have reached the spawn's step when it reads it
-            self._worker.send(("spawn", self.steps, self._mesh_key(mesh), k, lane, mass, speed, fillet_id))
+            self._worker.send(("spawn", self.steps, self._mesh_key(mesh), k, lane, mass, speed, fillet_id,
+                               lateral_offset))
             self._remote_models[fillet_id] = self._local.model_for(mesh).with_mass(mass)
         else:
-            self._local.spawn(mesh, k, lane, mass, speed, fillet_id)
+            self._local.spawn(mesh, k, lane, mass, speed, fillet_id, lateral_offset=lateral_offset)
         self._spawned += 1
         self._next_id = max(self._next_id, fillet_id + 1)
         return fillet_id
@@ -176,8 +197,13 @@ def _obey(world: LineWorld, meshes: dict[int, FilletMesh], msg: tuple) -> tuple[
         meshes[key] = mesh
         world.model_for(mesh)
     elif op == "spawn":
-        _, step, key, k, lane, mass, speed, fillet_id = msg
-        world.spawn(meshes[key], k, lane, mass, speed, fillet_id, spawn_time=step * world.config.dt)
+        _, step, key, k, lane, mass, speed, fillet_id, offset = msg
+        world.spawn(meshes[key], k, lane, mass, speed, fillet_id, spawn_time=step * world.config.dt,
+                    lateral_offset=offset)
+    elif op == "speed":
+        world.change_speed(msg[1], msg[2])
+    elif op == "release":
+        world.release(meshes.pop(msg[1]))
     elif op == "advance":
         removed, blown_before = [], len(world.blown_up)
         while world.steps < msg[1]:
