@@ -192,25 +192,3 @@ def test_spawn_service_spawns_or_explains(ros_node, ros_domain, tmp_path):
     assert not answers[1].success and "empty.obj" in answers[1].message
     assert not answers[2].success and "stiffness" in answers[2].message
     assert not answers[3].success and "lane" in answers[3].message
-
-
-def test_line_sim_lays_each_mesh_turned_by_its_own_seeded_yaw(ros_node, ros_domain, tmp_path):
-    """yaw_sd_deg turns every mesh as the sweep's --yaw-sd does: its ground truth carries the turned footprint."""
-    from woody_msgs.msg import FilletSpawn
-    from woody_sim.meshes import load_mesh_set, mesh_yaw, yawed
-
-    truths: list = []
-    ros_node.create_subscription(FilletSpawn, "/line/ground_truth", truths.append,
-                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    sim = NodeProcess("line_sim", {"duration_s": 0.5, "wait_for_subscribers": 0, "yaw_sd_deg": 20.0},
-                      domain_id=ros_domain, log_dir=tmp_path)
-    try:
-        assert spin_until(ros_node, lambda: len(truths) >= 3, timeout=120.0), sim.log_tail()
-    finally:
-        assert sim.stop() == 0, sim.log_tail()
-    straight = {m.name: m for m in load_mesh_set("builtin")[0]}
-    for truth in truths:
-        turned = yawed(straight[truth.mesh], mesh_yaw(truth.mesh, 20.0))
-        assert mesh_yaw(truth.mesh, 20.0) != 0.0 and truth.length != pytest.approx(straight[truth.mesh].length)
-        assert (truth.length, truth.width) == pytest.approx((turned.length, turned.width), abs=1e-6)

@@ -27,15 +27,40 @@ from std_msgs.msg import Header
 from woody_common import topics
 from woody_common.calibration import load_calibration
 from woody_common.images import image_message
-from woody_common.line import LANES, MAX_SIDE_RATE_HZ, MAX_SPAWN_DURATION_S, SPEED_RANGE_FPM, fpm_to_mps
+from woody_common.line import (
+    BELT_MARGIN_M,
+    LANE_PITCH_M,
+    LANES,
+    MAX_BELT_WIDTH_M,
+    MAX_SIDE_RATE_HZ,
+    MAX_SPAWN_DURATION_S,
+    MAX_SPAWN_SPACING_M,
+    MIN_LANE_PITCH_M,
+    MIN_SPAWN_SPACING_M,
+    SPEED_RANGE_FPM,
+    check_lane_pitch,
+    fpm_to_mps,
+    max_fillets_per_minute,
+    spacing_at_rate,
+)
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
 from woody_sim.frame_schedule import FrameSchedule
+from woody_sim.line_conditions import (
+    MAX_LATERAL_M,
+    MAX_YAW_DEG,
+    SCALE_RANGE,
+    LineConditions,
+    line_preset,
+    longest_placed_length,
+    place_mesh,
+    placement_for,
+)
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
-from woody_sim.meshes import MAX_YAW_SD_DEG, MeshError, load_mesh, load_mesh_set, mesh_yaw, yawed
+from woody_sim.meshes import MAX_YAW_SD_DEG, MeshError, load_mesh, load_mesh_set
 from woody_sim.pacing import LeadLimiter
 from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.sensor_model import sensor_preset, to_message_array
@@ -58,13 +83,18 @@ class LineSim(Node):
     def __init__(self) -> None:
         super().__init__("line_sim")
         p = self._declare_parameters()
+        p.__dict__.update(vars(self._declare_line(p.lanes, p.speed_fpm)))
         self._build_line(p)
         self._create_interfaces(p)
+        c = self.conditions
         self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
-            f"{p.lanes} lanes at {p.speed_fpm:g} FPM ({self.speed:.3f} m/s), {len(self.meshes)} meshes, "
-            f"k from {self.k_values}, "
+            f"{p.lanes} lanes at {p.speed_fpm:g} FPM ({self.speed:.3f} m/s), {p.pitch:g} m apart, "
+            f"{len(self.meshes)} meshes, k from {self.k_values}, "
             f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {p.top_rate:g} Hz, "
-            f"side {p.side_rate:g} Hz on lane {self.geometry.watched_lane}, top camera model {self.sensor.name}")
+            f"side {p.side_rate:g} Hz on lane {self.geometry.watched_lane}, top camera model {self.sensor.name}; "
+            f"{p.line} line: yaw sd {c.yaw_sd_deg:g} deg (max {c.yaw_max_deg:g}), {c.blunt_fraction:g} blunt end "
+            f"first, lateral sd {c.lateral_sd_m:g} m (max {c.lateral_max_m:g}), size x{c.scale_min:g}-"
+            f"{c.scale_max:g}, spacing {self._spacing():.3f} m")
 
     def _declare_parameters(self) -> SimpleNamespace:
         """Declare and check every parameter; the node's own settings become attributes, the rest is returned."""
@@ -75,15 +105,11 @@ class LineSim(Node):
                                                    "Stiffness values (N*m/rad) drawn per spawned fillet.")]
         mesh_spec = declare(self, "meshes", "builtin",
                             "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
-        self.yaw_sd = declare(self, "yaw_sd_deg", 0.0, "Fillets lie turned on the belt: each mesh by this many "
-                              "degrees times a normal draw seeded by its name (0 = straight; woody sweep --yaw-sd).",
-                              0.0, MAX_YAW_SD_DEG)
-        seed = declare(self, "seed", 7, "Seed of the stiffness draw and generated meshes.", 0, 2**31 - 1)
+        self.seed = seed = declare(self, "seed", 7, "Seed of the stiffness draw, the fillets' placements "
+                                   "(line conditions) and generated meshes.", 0, 2**31 - 1)
         self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, 100000)
         self.spawn_duration = declare(self, "spawn_duration_s", 0.0, "Stop spawning after this much sim time "
                                       "(0 = no limit).", 0.0, MAX_SPAWN_DURATION_S)
-        spacing = declare(self, "spawn_spacing_m", 0.45, "Belt distance between fillets in a lane (m).", 0.25, 10.0)
-        rate = declare(self, "fillets_per_minute", 0.0, "Spawn rate per lane; overrides spacing when > 0.", 0.0, 200.0)
         calibration = load_calibration()
         self.mass = declare(self, "mass", calibration.total_mass_kg, "Total mass M of a fillet's segment chain (kg); "
                             "a tuning value (config/calibration.yaml, docs/results.md).", 0.1, MAX_MASS)
@@ -119,15 +145,69 @@ class LineSim(Node):
         if side_lane >= lanes:
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
         return SimpleNamespace(
-            lanes=lanes, speed_fpm=speed_fpm, mesh_spec=mesh_spec, seed=seed, spacing=spacing, rate=rate,
+            lanes=lanes, speed_fpm=speed_fpm, mesh_spec=mesh_spec, seed=seed,
             damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, segments=segments, workers=workers,
             top_rate=top_rate, side_rate=side_rate, side_idle=side_idle, side_lane=side_lane,
             top_camera=top_camera, max_lead=max_lead)
 
+    def _declare_conditions(self) -> tuple[str, LineConditions]:
+        """The line preset and the placement parameters, whose defaults are the preset's values: ``line``
+        sets all seven, and any given explicitly wins over the preset."""
+        name = declare(self, "line", "tidy", "Line conditions preset: tidy (straight, narrow end first, centred, "
+                       "one size) or messy (woody_sim.line_conditions.LINE_PRESETS); it sets the defaults of "
+                       "yaw_sd_deg .. scale_max, and any of those given explicitly wins.")
+        preset = line_preset(name)
+        values = {
+            "yaw_sd_deg": declare(self, "yaw_sd_deg", preset.yaw_sd_deg, "Per-fillet turn on the belt: sd (deg) of "
+                                  "a normal draw truncated at yaw_max_deg (0 = straight).", 0.0, MAX_YAW_SD_DEG),
+            "yaw_max_deg": declare(self, "yaw_max_deg", preset.yaw_max_deg, "Largest turn (deg); 0 = 2 x "
+                                   f"yaw_sd_deg, at most {MAX_YAW_DEG:g}.", 0.0, MAX_YAW_DEG) or None,
+            "blunt_fraction": declare(self, "blunt_fraction", preset.blunt_fraction, "Fraction of fillets sent "
+                                      "blunt end first (turned 180 deg about the vertical).", 0.0, 1.0),
+            "lateral_sd_m": declare(self, "lateral_sd_m", preset.lateral_sd_m, "Offset of a fillet's centre across "
+                                    "its lane: sd (m) of a normal draw truncated at lateral_max_m.", 0.0,
+                                    MAX_LATERAL_M),
+            "lateral_max_m": declare(self, "lateral_max_m", preset.lateral_max_m, "Largest lateral offset (m), at "
+                                     "most half the lane pitch; 0 = 2 x lateral_sd_m.", 0.0, MAX_LATERAL_M) or None,
+            "scale_min": declare(self, "scale_min", preset.scale_min, "Smallest size factor s (uniform draw); the "
+                                 "chain's mass is mass x s^3.", *SCALE_RANGE),
+            "scale_max": declare(self, "scale_max", preset.scale_max, "Largest size factor s.", *SCALE_RANGE),
+        }
+        return name, LineConditions(**values)
+
+    def _declare_line(self, lanes: int, speed_fpm: float) -> SimpleNamespace:
+        """Placement, lane pitch, in-lane spacing and speed change parameters, checked against each other."""
+        line, self.conditions = self._declare_conditions()
+        pitch = check_lane_pitch(lanes, declare(
+            self, "lane_pitch_m", LANE_PITCH_M, "Distance between lane centres across the belt (m); the belt is "
+            f"lanes x pitch + {2 * BELT_MARGIN_M:g} m wide, at most {MAX_BELT_WIDTH_M:g} m. The segmenter needs "
+            "the same value.", MIN_LANE_PITCH_M, MAX_BELT_WIDTH_M - 2 * BELT_MARGIN_M))
+        if self.conditions.lateral_max_m > pitch / 2 + 1e-12:
+            raise ValueError(f"lateral_max_m {self.conditions.lateral_max_m:g} m would move fillets out of their "
+                             f"lane: at most half the lane pitch, {pitch / 2:g} m")
+        spacing = declare(self, "spawn_spacing_m", 0.45, "Belt distance between fillets in a lane (m); down to "
+                          f"{MIN_SPAWN_SPACING_M:g} m, where the shortest fillets touch end to end.",
+                          MIN_SPAWN_SPACING_M, MAX_SPAWN_SPACING_M)
+        top_speed = fpm_to_mps(SPEED_RANGE_FPM[1])
+        rate = declare(self, "fillets_per_minute", 0.0, "Spawn rate per lane; overrides spacing when > 0 (at most "
+                       f"{MIN_SPAWN_SPACING_M:g} m apart at the line speed).", 0.0, max_fillets_per_minute(top_speed))
+        change_fpm = declare(self, "speed_change_fpm", 0.0, "New belt speed (FPM) from speed_change_at_s on; every "
+                             "fillet on the belt follows it (0 = no change).", 0.0, SPEED_RANGE_FPM[1])
+        change_at = declare(self, "speed_change_at_s", 0.0, "Sim time (s) of the belt speed change.", 0.0,
+                            MAX_SPAWN_DURATION_S)
+        if 0.0 < change_fpm < SPEED_RANGE_FPM[0]:
+            raise ValueError(f"speed_change_fpm must be 0 or within {SPEED_RANGE_FPM[0]:g}..{SPEED_RANGE_FPM[1]:g} "
+                             f"FPM, got {change_fpm:g}")
+        for fpm in (speed_fpm, change_fpm or speed_fpm):
+            _check_rate(rate, fpm)
+        return SimpleNamespace(line=line, pitch=pitch, spacing=spacing, rate=rate, change_fpm=change_fpm,
+                               change_at=change_at)
+
     def _build_line(self, p: SimpleNamespace) -> None:
         """The simulated line: geometry, physics world, mesh set, spawn schedule, frame timing, renderer."""
         self.speed = fpm_to_mps(p.speed_fpm)
-        self.geometry = LineGeometry(lanes=p.lanes, side_lane=p.side_lane, **top_camera_preset(p.top_camera))
+        self.geometry = LineGeometry(lanes=p.lanes, lane_pitch=p.pitch, side_lane=p.side_lane,
+                                     **top_camera_preset(p.top_camera))
         config = PhysicsConfig(n_segments=p.segments, damping=p.damping, friction_static=p.mu_static,
                                friction_dynamic=p.mu_dynamic)
         self.world = SplitLineWorld(self.geometry, config) if p.workers else LineWorld(self.geometry, config)
@@ -136,22 +216,34 @@ class LineSim(Node):
             self.get_logger().error(error)
         if not meshes:
             raise ValueError(f"mesh set '{p.mesh_spec}' has no loadable mesh")
-        meshes = [self._laid_on_belt(mesh) for mesh in meshes]
         self.meshes = {m.name: m for m in meshes}
         for mesh in meshes:  # build every chain model now (~0.2 s each), not in the loop at its first spawn
             self.world.model_for(mesh)
-        interval = 60.0 / p.rate if p.rate > 0 else p.spacing / self.speed
-        self.schedule = SpawnSchedule(meshes=meshes, k_values=self.k_values, lanes=p.lanes, interval_s=interval,
-                                      seed=p.seed)
+        self.spacing_m, self.rate = p.spacing, p.rate
+        self.schedule = SpawnSchedule(meshes=meshes, k_values=self.k_values, lanes=p.lanes,
+                                      interval_s=self._interval(), seed=p.seed)
         self.spawned = 0
+        self._placed: dict[int, tuple] = {}  # fillet id -> (its own placed mesh, its visuals), released on removal
+        self.speed_change = (fpm_to_mps(p.change_fpm), p.change_at, p.change_fpm) if p.change_fpm else None
+        if self.speed_change:
+            self.world.change_speed(self.speed_change[0], p.change_at)
+        longest = longest_placed_length(meshes, self.conditions)
+        if self._spacing() < longest:
+            self.get_logger().warning(f"in-lane spacing {self._spacing():.3f} m is below the longest placed "
+                                      f"fillet ({longest:.3f} m): fillets of a lane may overlap (they do not "
+                                      "collide)")
         self.top_period = 1.0 / p.top_rate
         self.side_period = 1.0 / p.side_rate if p.side_rate > 0 else None
         self.side_gate = SideFrameGate(idle_period_s=1.0 / p.side_idle)
         self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
 
-    def _laid_on_belt(self, mesh):
-        """The mesh turned as it lies on this line's belt (``yaw_sd_deg``; straight by default)."""
-        return yawed(mesh, mesh_yaw(mesh.name, self.yaw_sd)) if self.yaw_sd else mesh
+    def _interval(self) -> float:
+        """Seconds between spawns in a lane: the rate's, or the spacing at the current belt speed."""
+        return 60.0 / self.rate if self.rate > 0 else self.spacing_m / self.speed
+
+    def _spacing(self) -> float:
+        """In-lane spacing (m) at the current belt speed."""
+        return spacing_at_rate(self.speed, self.rate) if self.rate > 0 else self.spacing_m
 
     def _create_interfaces(self, p: SimpleNamespace) -> None:
         """Publishers (clock, ground truth, cameras, camera poses), the spawn service and the pacing subscription."""
@@ -182,22 +274,31 @@ class LineSim(Node):
     # ------------------------------------------------------------------ spawning
 
     def spawn(self, mesh, k: float, lane: int, mass: float, speed: float) -> int:
-        fillet_id = self.world.spawn(mesh, k=k, lane=lane, mass=mass, speed_mps=speed)
+        """Spawn ``mesh`` placed by the line conditions (the spawn count indexes its draw); its chain weighs
+        ``mass`` x scale^3. The ground truth carries the placed footprint and the offset position."""
+        placement = placement_for(self.conditions, self.seed, self.spawned)
+        placed = place_mesh(mesh, placement)
+        mass = mass * placement.scale ** 3
+        fillet_id = self.world.spawn(placed, k=k, lane=lane, mass=mass, speed_mps=speed,
+                                     lateral_offset=placement.lateral_offset_m)
         model = self.world.model(fillet_id)
         self.renderer.add_fillet(fillet_id, lane, model.visuals)
+        if placed is not mesh:
+            self._placed[fillet_id] = (placed, model.visuals)
         msg = FilletSpawn(fillet_id=fillet_id, lane=lane, mesh=mesh.name, stiffness=float(k),
                           damping=float(self.world.config.damping), mass=float(mass), line_speed=float(speed),
-                          segments=model.n_segments, length=float(mesh.length), width=float(mesh.width),
-                          thickness=float(mesh.thickness))
+                          segments=model.n_segments, length=float(placed.length), width=float(placed.width),
+                          thickness=float(placed.thickness))
         msg.header = self._header(WORLD_FRAME)
-        msg.position.x, msg.position.y = float(self.geometry.spawn_x), float(self.geometry.lane_y(lane))
+        msg.position.x = float(self.geometry.spawn_x)
+        msg.position.y = float(self.geometry.lane_y(lane) + placement.lateral_offset_m)
         self.truth_pub.publish(msg)
         self.spawned += 1
         return fillet_id
 
     def on_spawn_request(self, request: SpawnFillet.Request, response: SpawnFillet.Response) -> SpawnFillet.Response:
         try:
-            mesh = self.meshes.get(request.mesh) or self._laid_on_belt(load_mesh(request.mesh))
+            mesh = self.meshes.get(request.mesh) or load_mesh(request.mesh)
             fillet_id = self.spawn(mesh, request.stiffness, int(request.lane), request.mass or self.mass,
                                    request.line_speed or self.speed)
         except (MeshError, ValueError) as exc:
@@ -207,7 +308,19 @@ class LineSim(Node):
         response.success, response.fillet_id, response.message = True, fillet_id, f"spawned fillet {fillet_id}"
         return response
 
+    def _follow_speed_change(self) -> None:
+        """At speed_change_at_s the node's speed (spawns, spacing) follows the belt, which the world changes."""
+        if self.speed_change is None or self.world.time + 1e-9 < self.speed_change[1]:
+            return
+        old = self.speed
+        self.speed, at, fpm = self.speed_change
+        self.speed_change = None
+        self.schedule.interval_s = self._interval()
+        self.get_logger().info(f"belt speed {old:.3f} -> {self.speed:.3f} m/s ({fpm:g} FPM) at sim time {at:g} s; "
+                               f"in-lane spacing now {self._spacing():.3f} m")
+
     def _spawn_due(self) -> None:
+        self._follow_speed_change()
         limit_reached = (self.max_fillets and self.spawned >= self.max_fillets) or (
             self.spawn_duration and self.world.time >= self.spawn_duration)
         if limit_reached:
@@ -298,6 +411,10 @@ class LineSim(Node):
         """Stop rendering the fillets the world removed; a chain that blew up is worth a warning."""
         for fillet_id in self.world.take_removed():
             self.renderer.remove_fillet(fillet_id)
+            placed = self._placed.pop(fillet_id, None)
+            if placed is not None:  # a fillet's own mesh: no later spawn uses its model or visuals
+                self.world.release(placed[0])
+                self.renderer.release(placed[1])
             if fillet_id in self.world.blown_up:
                 self.get_logger().warning(f"fillet {fillet_id} removed: its chain blew up numerically "
                                           "(a physics defect: please report it); it will be unscored")
@@ -326,6 +443,15 @@ class LineSim(Node):
     def close(self) -> None:
         self.renderer.close()
         self.world.close()
+
+
+def _check_rate(rate: float, speed_fpm: float) -> None:
+    """A spawn rate must keep fillets at least MIN_SPAWN_SPACING_M apart at the belt speed (one line if not)."""
+    speed = fpm_to_mps(speed_fpm)
+    if rate > 0 and spacing_at_rate(speed, rate) < MIN_SPAWN_SPACING_M - 1e-12:
+        raise ValueError(f"fillets_per_minute {rate:g} at {speed_fpm:g} FPM puts fillets "
+                         f"{spacing_at_rate(speed, rate):.3f} m apart, closer than {MIN_SPAWN_SPACING_M:g} m: at "
+                         f"most {max_fillets_per_minute(speed):.0f} per minute")
 
 
 def _camera_pose(camera) -> PoseStamped:

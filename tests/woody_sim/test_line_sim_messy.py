@@ -1,0 +1,92 @@
+"""line_sim on a messy line, through its entry point: each fillet placed by its own seeded draw, reproducibly."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+from conftest import spin_until
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from woody_tools.processes import NodeProcess, entry_point
+
+pytestmark = pytest.mark.ros
+"""Starts node entry points as processes."""
+
+MESSY = {"line": "messy", "lane_pitch_m": 0.12, "spawn_spacing_m": 0.2, "speed_change_fpm": 130.0,
+         "speed_change_at_s": 0.2, "duration_s": 0.5, "side_rate_hz": 0.0, "wait_for_subscribers": 0}
+
+
+def ground_truth(ros_node, ros_domain, log_dir, params: dict, count: int = 6) -> list:
+    """The FilletSpawn messages of one short run, in spawn order."""
+    from woody_msgs.msg import FilletSpawn
+
+    truths: list = []
+    subscription = ros_node.create_subscription(
+        FilletSpawn, "/line/ground_truth", truths.append,
+        QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    sim = NodeProcess("line_sim", params, domain_id=ros_domain, log_dir=log_dir)
+    try:
+        assert spin_until(ros_node, lambda: len(truths) >= count, timeout=120.0), sim.log_tail()
+    finally:
+        assert sim.stop() == 0, sim.log_tail()
+        ros_node.destroy_subscription(subscription)
+    if params.get("speed_change_fpm"):
+        assert "belt speed 0.508 -> 0.660 m/s (130 FPM)" in sim.log_tail()
+    return sorted(truths, key=lambda t: t.fillet_id)[:count]
+
+
+def test_a_messy_line_places_each_fillet_by_its_seeded_draw(ros_node, ros_domain, tmp_path):
+    from woody_common.calibration import load_calibration
+    from woody_sim.line_conditions import LINE_PRESETS, place_mesh, placement_for
+    from woody_sim.meshes import load_mesh_set
+
+    first = ground_truth(ros_node, ros_domain, tmp_path / "a", MESSY)
+    again = ground_truth(ros_node, ros_domain, tmp_path / "b", MESSY)
+    fields = ("mesh", "lane", "length", "width", "mass", "line_speed")
+    assert [[getattr(t, f) for f in fields] + [t.position.y] for t in first] == \
+        [[getattr(t, f) for f in fields] + [t.position.y] for t in again]
+    straight = {m.name: m for m in load_mesh_set("builtin")[0]}
+    mass = load_calibration().total_mass_kg
+    for truth in first:
+        placement = placement_for(LINE_PRESETS["messy"], 7, truth.fillet_id)
+        placed = place_mesh(straight[truth.mesh], placement)
+        assert (truth.length, truth.width) == pytest.approx((placed.length, placed.width), abs=1e-6)
+        assert truth.mass == pytest.approx(mass * placement.scale ** 3)
+        assert truth.position.y == pytest.approx((1 - truth.lane) * 0.12 + placement.lateral_offset_m)
+    assert len({round(t.length, 4) for t in first[:3]}) == 3  # the lanes of one spawn carry one mesh, laid apart
+    assert len({round(t.mass, 6) for t in first}) == 6 and len({round(t.position.y, 6) for t in first}) == 6
+    assert [t.line_speed for t in first] == pytest.approx([0.508] * 3 + [0.6604] * 3)
+
+
+def test_yaw_sd_alone_turns_each_fillet_by_its_own_draw(ros_node, ros_domain, tmp_path):
+    """``yaw_sd_deg`` (woody run --yaw-sd) on the tidy line: the lanes of one spawn carry one mesh turned apart."""
+    from woody_sim.line_conditions import LineConditions, place_mesh, placement_for
+    from woody_sim.meshes import load_mesh_set
+
+    params = {"yaw_sd_deg": 20.0, "duration_s": 0.2, "side_rate_hz": 0.0, "wait_for_subscribers": 0}
+    truths = ground_truth(ros_node, ros_domain, tmp_path, params, count=3)
+    straight = {m.name: m for m in load_mesh_set("builtin")[0]}
+    for truth in truths:
+        placement = placement_for(LineConditions(yaw_sd_deg=20.0), 7, truth.fillet_id)
+        assert 0.0 < abs(placement.yaw_deg) <= 40.0 and placement.scale == 1.0 and not placement.blunt_first
+        turned = place_mesh(straight[truth.mesh], placement)
+        assert (truth.length, truth.width) == pytest.approx((turned.length, turned.width), abs=1e-6)
+    assert len({t.mesh for t in truths}) == 1 and len({round(t.length, 5) for t in truths}) == 3
+
+
+@pytest.mark.parametrize(("name", "value", "mention"), [
+    ("line", "muddy", "unknown line preset 'muddy'"),
+    ("lane_pitch_m", "0.2", "need a 1.360 m belt"),
+    ("lateral_max_m", "0.045", "at most half the lane pitch"),
+    ("fillets_per_minute", "250.0", "at most 203 per minute"),
+    ("spawn_spacing_m", "0.1", "spawn_spacing_m"),
+    ("speed_change_fpm", "0.5", "speed_change_fpm must be 0 or within 1..400"),
+    ("scale_min", "1.3", "scale_max must be >= scale_min 1.3"),
+])
+def test_line_sim_refuses_a_bad_line_in_one_line(name, value, mention):
+    extra = {"lane_pitch_m": ["-p", "lanes:=6"], "lateral_max_m": ["-p", "lane_pitch_m:=0.08"]}.get(name, [])
+    result = subprocess.run([entry_point("line_sim"), "--ros-args", "-p", f"{name}:={value}", *extra],
+                            capture_output=True, text=True, timeout=60)
+    lines = [line for line in result.stderr.splitlines() if "pybullet build time" not in line]
+    assert result.returncode == 2 and len(lines) == 1 and mention in lines[0], result.stderr
