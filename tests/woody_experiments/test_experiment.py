@@ -5,8 +5,12 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import pytest
+
+from woody_common.line import fpm_to_mps
 from woody_experiments.experiment import RunSpec, evaluate_run
-from woody_sim.meshes import load_mesh_set, yawed
+from woody_sim.line_conditions import place_mesh
+from woody_sim.meshes import load_mesh_set
 
 
 def test_a_run_seen_through_a_noisy_camera_is_scored_and_reproducible():
@@ -22,13 +26,27 @@ def test_a_run_seen_through_a_noisy_camera_is_scored_and_reproducible():
 def test_a_fillet_lying_turned_on_the_belt_is_simulated_turned_and_still_scored(monkeypatch):
     from woody_experiments import experiment
 
-    turned = []
-    monkeypatch.setattr(experiment, "yawed", lambda mesh, deg: turned.append(deg) or yawed(mesh, deg))
+    placed = []
+    monkeypatch.setattr(experiment, "place_mesh", lambda mesh, p: placed.append(p) or place_mesh(mesh, p))
     mesh = load_mesh_set("builtin")[0][0]
     straight = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, lanes=1, side=False), mesh)
-    assert turned == []
+    assert placed[-1].keeps_mesh
     (row,) = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, lanes=1, side=False, yaw_deg=15.0), mesh)
-    assert turned == [15.0] and row["status"] == "scored" and row["phi"] != straight[0]["phi"]
+    assert placed[-1].yaw_deg == 15.0 and row["status"] == "scored" and row["phi"] != straight[0]["phi"]
+    assert row["yaw_deg"] == 15.0 and row["leading_end"] == "narrow"
+
+
+def test_a_condition_lays_the_fillet_as_drawn_with_the_mass_following_its_size():
+    mesh = load_mesh_set("builtin")[0][0]
+    spec = RunSpec(mesh.name, 0.0, 130.0, lanes=1, side=False, mass=20.0, condition="messy")
+    (row,) = evaluate_run(spec, mesh)
+    placement = spec.placement
+    assert placement == RunSpec(mesh.name, 100.0, 130.0, condition="messy").placement  # paired across k
+    assert row["scale"] == placement.scale and row["mass"] == pytest.approx(20.0 * placement.scale ** 3)
+    assert row["leading_end"] == ("blunt" if placement.blunt_first else "narrow")
+    assert row["status"] == "scored" and row["speed_mps"] == pytest.approx(fpm_to_mps(130.0), rel=0.03)
+    (blunt,) = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, lanes=1, side=False, condition="blunt"), mesh)
+    assert blunt["blunt_first"] == 1 and blunt["leading_end"] == "blunt" and math.isfinite(blunt["line_phi"])
 
 
 def test_the_colour_outline_keeps_a_stiff_fillet_woody_through_stereo_noise(monkeypatch):

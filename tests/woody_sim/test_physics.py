@@ -340,11 +340,16 @@ def test_a_chain_moves_the_same_in_a_world_that_has_run_other_chains():
 
     pybullet's ``calculateMassMatrix`` did leak: it keeps the inverse-dynamics model it built for a body and a
     later chain can inherit it, so the hinge law integrated it with another fillet's mass matrix (up to 100 %
-    off) and it blew up in a running line (docs/physics.md). Contact order may differ, so round-off may too.
+    off) and it blew up in a running line (docs/physics.md). Contact order may differ, so round-off may too:
+    the two agree to round-off while the chain bends over the roller, and once it slides off, a contact
+    event can amplify that round-off to millimetres (how much depends on the build of pybullet), never to the
+    metres a wrong mass matrix gives.
     """
     fresh, aged = chain_poses_after(0), chain_poses_after(6)
     assert len(aged) == len(fresh) == 300
-    assert np.abs(fresh - aged).max() < 1e-5
+    step_error = np.abs(fresh - aged).reshape(300, -1).max(axis=1)
+    assert step_error[:140].max() < 1e-9
+    assert step_error.max() < 0.01
 
 
 def test_chain_fate_tells_blow_ups_finished_chains_and_live_ones_apart():

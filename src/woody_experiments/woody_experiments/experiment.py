@@ -34,6 +34,7 @@ pybullet world is rebuilt per run (cheap) so every run starts identically.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import zlib
 from dataclasses import dataclass
@@ -42,9 +43,11 @@ import numpy as np
 
 from woody_common.calibration import load_calibration
 from woody_common.line import fpm_to_mps
+from woody_experiments.conditions import TIDY, run_placement
+from woody_sim.line_conditions import FilletPlacement, place_mesh
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config, seed_dynamic_friction
-from woody_sim.meshes import FilletMesh, yawed
+from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer
 from woody_sim.sensor_model import sensor_preset
 from woody_vision.camera_model import LaneLayout
@@ -53,8 +56,11 @@ from woody_vision.segmentation import REAL_CAMERA_FILTERS, BackgroundModel, Segm
 from woody_vision.side_view import SidePassageTracker
 from woody_vision.tracking import CentroidTracker
 
-RUN_COLUMNS = ["mesh", "k", "speed_fpm", "lane", "mass", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be",
+RUN_COLUMNS = ["mesh", "k", "speed_fpm", "condition", "lane", "mass", "yaw_deg", "blunt_first", "scale", "phi",
+               "hu_term", "solidity_term", "line_phi", "speed_mps", "leading_end", "rejected", "nmdm", "mdm", "be",
                "status", "reason"]
+"""One row per lane: the run (mesh, k, speed, condition and how the fillet lay), the paper's Φ (NaN unless its
+window closed cleanly), the line score with what the grader measured, the side view, and the verdict's status."""
 
 SPAWN_X = -0.42
 """Sweeps spawn just inside the top camera's view (fillet centre, m): only the approach the scores need."""
@@ -97,7 +103,9 @@ class RunSpec:
     sensor: str = "ideal"
     """Top camera error model (woody_sim.sensor_model preset), seeded per run."""
     yaw_deg: float = 0.0
-    """How the fillet lies on the belt: turned this far about the vertical (woody_sim.meshes.yawed)."""
+    """An extra turn about the vertical (woody_sim.meshes.yawed), on top of the condition's placement."""
+    condition: str = TIDY
+    """How fillets lie on the line (woody_experiments.conditions): tidy, turned, blunt, size or messy."""
 
     def physics_overrides(self) -> dict:
         """PhysicsConfig fields this run sets itself (the rest come from the calibration)."""
@@ -108,8 +116,14 @@ class RunSpec:
         return out
 
     @property
-    def key(self) -> tuple[str, float, float, float | None]:
-        return (self.mesh, float(self.k), float(self.speed_fpm), self.mass)
+    def key(self) -> tuple[str, float, float, float | None, str]:
+        return (self.mesh, float(self.k), float(self.speed_fpm), self.mass, self.condition)
+
+    @property
+    def placement(self) -> FilletPlacement:
+        """How the run's fillet lies (its condition's draw, plus ``yaw_deg``)."""
+        drawn = run_placement(self.mesh, self.condition, self.speed_fpm)
+        return dataclasses.replace(drawn, yaw_deg=drawn.yaw_deg + self.yaw_deg)
 
 
 def _renderer(geometry: LineGeometry, top: bool, side: bool):
@@ -133,12 +147,13 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     receives frame counts.
     """
     geometry = LineGeometry(lanes=spec.lanes, spawn_x=SPAWN_X, **top_camera_preset(spec.top_camera))
-    mesh = yawed(mesh, spec.yaw_deg) if spec.yaw_deg else mesh
+    placement = spec.placement
+    mesh = place_mesh(mesh, placement)
     renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side)
     calibration = load_calibration()
     world = LineWorld(geometry, config or calibrated_config(calibration, **spec.physics_overrides()))
     speed = fpm_to_mps(spec.speed_fpm)
-    mass = spec.mass if spec.mass is not None else calibration.total_mass_kg
+    mass = (spec.mass if spec.mass is not None else calibration.total_mass_kg) * placement.scale ** 3
     top = side = None
     n_top = 0
     try:
@@ -174,7 +189,7 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
         renderer.clear()
     if stats is not None:
         stats.update(top_frames=n_top, side_frames=side.frames if side is not None else 0, sim_s=world.time)
-    return _lane_rows(spec, mass, geometry.watched_lane, top.results if top is not None else {},
+    return _lane_rows(spec, placement, mass, geometry.watched_lane, top.results if top is not None else {},
                       side.result if side is not None else None)
 
 
@@ -220,7 +235,8 @@ class _TopView:
     def __init__(self, spec: RunSpec, geometry: LineGeometry, background: tuple[np.ndarray, np.ndarray]) -> None:
         top_cam = geometry.top_camera()
         layout = LaneLayout(tuple(top_cam.k.reshape(-1)), geometry.top_height, spec.lanes, geometry.lane_pitch)
-        self.grader = FilletGrader(geometry.top_edge_row(), watched_lane=None)
+        self.grader = FilletGrader(geometry.top_edge_row(), watched_lane=None,
+                                   pixels_per_metre=float(top_cam.k[1, 1]) / geometry.top_height)
         self.tracker = CentroidTracker(lane_layout=layout)
         self.camera, self.rng = sensor_preset(spec.sensor), np.random.default_rng(_sensor_seed(spec))
         self.color_rng = np.random.default_rng((_sensor_seed(spec), 1))
@@ -288,13 +304,16 @@ class _SideView:
             self.result = measurement
 
 
-def _lane_rows(spec: RunSpec, mass: float, watched: int, results: dict[int, dict], side_result) -> list[dict]:
+def _lane_rows(spec: RunSpec, placement: FilletPlacement, mass: float, watched: int, results: dict[int, dict],
+               side_result) -> list[dict]:
     """One RUN_COLUMNS row per lane from the top-view results and the watched lane's side measurement."""
     rows = []
     for lane in range(spec.lanes):
-        row = {"mesh": spec.mesh, "k": spec.k, "speed_fpm": spec.speed_fpm, "lane": lane, "mass": mass,
-               "phi": math.nan, "hu_term": math.nan, "solidity_term": math.nan, "nmdm": math.nan, "mdm": math.nan,
-               "be": math.nan, "status": "unscored" if spec.top else "", "reason": ""}
+        row = {"mesh": spec.mesh, "k": spec.k, "speed_fpm": spec.speed_fpm, "condition": spec.condition,
+               "lane": lane, "mass": mass, "yaw_deg": placement.yaw_deg, "blunt_first": int(placement.blunt_first),
+               "scale": placement.scale, "phi": math.nan, "hu_term": math.nan, "solidity_term": math.nan,
+               "line_phi": math.nan, "speed_mps": math.nan, "leading_end": "", "rejected": 0, "nmdm": math.nan,
+               "mdm": math.nan, "be": math.nan, "status": "unscored" if spec.top else "", "reason": ""}
         if spec.top:
             row.update(results.get(lane, {"reason": "no verdict before the run ended"}))
         if spec.side and lane == watched:
@@ -309,14 +328,22 @@ def _lane_rows(spec: RunSpec, mass: float, watched: int, results: dict[int, dict
 
 def _sensor_seed(spec: RunSpec) -> int:
     """The camera model's seed for a run: fixed by the run itself, so results do not depend on job order."""
-    return zlib.crc32(f"{spec.mesh}|{spec.k:g}|{spec.speed_fpm:g}|{spec.sensor}".encode())
+    return zlib.crc32(f"{spec.mesh}|{spec.k:g}|{spec.speed_fpm:g}|{spec.sensor}{_condition_suffix(spec)}".encode())
 
 
 def _shape_row(graded) -> dict:
     """The lane's top-down columns, plus under "trace" its window frame by frame (time relative to the close)."""
     shape = graded.shape
     close = shape.stamp if shape.stamp is not None else math.nan
-    trace = [{"t_rel_s": f.stamp - close, "phi": f.phi, "hu_term": f.hu_term, "solidity_term": f.solidity_term}
-             for f in shape.trace]
-    return {"phi": float(shape.phi), "hu_term": float(shape.hu_term), "solidity_term": float(shape.solidity_term),
-            "status": shape.status, "reason": shape.reason, "trace": trace}
+    trace = [{"t_rel_s": f.stamp - close, "phi": f.phi, "hu_term": f.hu_term, "solidity_term": f.solidity_term,
+              "overhang": f.overhang} for f in shape.trace + shape.extra_trace]
+    paper = shape.window_closed
+    return {"phi": float(shape.phi) if paper else math.nan, "hu_term": float(shape.hu_term) if paper else math.nan,
+            "solidity_term": float(shape.solidity_term) if paper else math.nan, "line_phi": float(shape.line_phi),
+            "speed_mps": graded.conditions.speed_mps, "leading_end": shape.leading_end,
+            "rejected": shape.rejected_frames, "status": shape.status, "reason": shape.reason, "trace": trace}
+
+
+def _condition_suffix(spec: RunSpec) -> str:
+    """The condition's part of the sensor seed ('' on the tidy line, so tidy runs keep their noise)."""
+    return "" if spec.condition == TIDY else f"|{spec.condition}"

@@ -19,6 +19,7 @@ import math
 import os
 from pathlib import Path
 
+from woody_experiments.conditions import TIDY
 from woody_experiments.experiment import RUN_COLUMNS, RunSpec, evaluate_run
 from woody_experiments.traces import run_file
 from woody_sim.meshes import mesh_yaw
@@ -33,8 +34,9 @@ META_FILE = "sweep_meta.json"
 CSV_FILE = "runs.csv"
 
 
-def run_key(mesh: str, k: float, speed: float, mass: float) -> tuple:
-    return (mesh, round(float(k), 6), round(float(speed), 6), round(float(mass), 6))
+def run_key(mesh: str, k: float, speed: float, mass: float, condition: str = TIDY) -> tuple:
+    """A run's identity in ``runs.csv``: mesh, k, speed, the chain mass before any size scaling, condition."""
+    return (mesh, round(float(k), 6), round(float(speed), 6), round(float(mass), 3), condition)
 
 
 def read_rows(path: Path) -> list[dict]:
@@ -93,13 +95,15 @@ def completed_runs(path: Path, lanes: int, traced: Path | None = None) -> tuple[
     by_run: dict[tuple, list[dict]] = {}
     for row in rows:
         try:
-            key = run_key(row["mesh"], float(row["k"]), float(row["speed_fpm"]), float(row["mass"]))
+            condition = row.get("condition") or TIDY
+            mass = float(row["mass"]) / float(row.get("scale") or 1.0) ** 3
+            key = run_key(row["mesh"], float(row["k"]), float(row["speed_fpm"]), mass, condition)
         except (KeyError, ValueError):
             continue
         by_run.setdefault(key, []).append(row)
     done = {key for key, rs in by_run.items() if {int(r["lane"]) for r in rs} >= set(range(lanes))}
     if traced is not None:
-        done = {key for key in done if run_file(traced, key[0], key[1], key[2], key[3]).exists()}
+        done = {key for key in done if run_file(traced, *key).exists()}
     keep = [r for key, rs in by_run.items() if key in done for r in rs]
     return done, RunsFile(path, keep)
 
@@ -111,14 +115,18 @@ def run_rows(run: RunSpec, mesh) -> list[dict]:
     try:
         return evaluate_run(run, mesh)
     except Exception as exc:
-        return [{"mesh": run.mesh, "k": run.k, "speed_fpm": run.speed_fpm, "lane": lane, "mass": run.mass,
-                 "status": "error", "reason": f"{type(exc).__name__}: {exc}"} for lane in range(run.lanes)]
+        return [{"mesh": run.mesh, "k": run.k, "speed_fpm": run.speed_fpm, "condition": run.condition, "lane": lane,
+                 "mass": run.mass, "status": "error", "reason": f"{type(exc).__name__}: {exc}"}
+                for lane in range(run.lanes)]
 
 
 def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
-         side: bool = True, top_camera: str = "default", sensor: str = "ideal", yaw_sd: float = 0.0
-         ) -> list[RunSpec]:
-    """Runs ordered so that partial results already span the grid (k and speed vary fastest)."""
-    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side, top_camera=top_camera,
-                    sensor=sensor, yaw_deg=mesh_yaw(name, yaw_sd))
-            for name in mesh_names for speed in speeds for k in ks]
+         side: bool = True, top_camera: str = "default", sensor: str = "ideal", yaw_sd: float = 0.0,
+         conditions: tuple[str, ...] = (TIDY,)) -> list[RunSpec]:
+    """Runs ordered so that partial results already span the grid (k, speed and condition vary fastest).
+
+    The side view is measured on the tidy line only: the paper's side-view tables are about it.
+    """
+    return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side and condition == TIDY,
+                    top_camera=top_camera, sensor=sensor, yaw_deg=mesh_yaw(name, yaw_sd), condition=condition)
+            for name in mesh_names for condition in conditions for speed in speeds for k in ks]

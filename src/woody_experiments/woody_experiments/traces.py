@@ -17,20 +17,24 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
+from woody_experiments.conditions import TIDY
+
 TRACE_DIR = "traces"
 TRACE_CSV = "traces.csv"
 COLUMNS = ["mesh", "k", "speed_fpm", "mass", "lane", "frame", "t_rel_s", "phi", "hu_term", "solidity_term"]
 
 
-def run_file(out: Path, mesh: str, k: float, speed: float, mass: float) -> Path:
-    """Where one run's traces go."""
-    return Path(out) / TRACE_DIR / "runs" / f"{mesh}_k{k:g}_{speed:g}fpm_M{mass:g}.csv"
+def run_file(out: Path, mesh: str, k: float, speed: float, mass: float, condition: str = TIDY) -> Path:
+    """Where one run's traces go (``mass`` before size scaling)."""
+    suffix = "" if condition == TIDY else f"_{condition}"
+    return Path(out) / TRACE_DIR / "runs" / f"{mesh}_k{k:g}_{speed:g}fpm_M{mass:g}{suffix}.csv"
 
 
 def write_run(out: Path, rows: Sequence[dict]) -> Path:
     """Write the traces of one run's lane rows (they share mesh, k, speed, mass); returns the file."""
     first = rows[0]
-    path = run_file(out, first["mesh"], float(first["k"]), float(first["speed_fpm"]), float(first["mass"]))
+    path = run_file(out, first["mesh"], float(first["k"]), float(first["speed_fpm"]),
+                    float(first["mass"]) / float(first.get("scale") or 1.0) ** 3, first.get("condition") or TIDY)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     with tmp.open("w", newline="") as fh:

@@ -7,6 +7,7 @@ import math
 from collections.abc import Callable
 
 from woody_common.line import SPEED_RANGE_FPM
+from woody_experiments.conditions import SWEEP_CONDITIONS
 from woody_sim.meshes import MAX_YAW_SD_DEG
 
 
@@ -44,6 +45,16 @@ POSITIVE_NUMBERS = number_list(_positive, "every value must be a positive number
 STIFFNESSES = number_list(lambda k: math.isfinite(k) and k >= 0.0, "every k must be a finite number >= 0")
 LINE_SPEEDS = number_list(lambda s: SPEED_RANGE_FPM[0] <= s <= SPEED_RANGE_FPM[1],
                           f"every speed must be within {SPEED_RANGE_FPM[0]:g}..{SPEED_RANGE_FPM[1]:g} FPM")
+def _conditions(text: str) -> list[str]:
+    """Comma-separated sweep condition names, each known (woody_experiments.conditions)."""
+    names = [item.strip() for item in text.split(",") if item.strip()]
+    unknown = [n for n in names if n not in SWEEP_CONDITIONS]
+    if not names or unknown:
+        raise argparse.ArgumentTypeError(f"expected conditions among {', '.join(SWEEP_CONDITIONS)}, got {text!r}")
+    return list(dict.fromkeys(names))
+
+
+CONDITIONS = _conditions
 YAW_SPREAD = number(lambda deg: 0.0 <= deg <= MAX_YAW_SD_DEG, f"must be within 0..{MAX_YAW_SD_DEG:g} degrees")
 
 

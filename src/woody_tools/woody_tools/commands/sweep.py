@@ -27,6 +27,7 @@ from pathlib import Path
 
 from woody_common.calibration import load_calibration
 from woody_experiments import cluster, sweep, sweep_report, traces
+from woody_experiments.conditions import SWEEP_CONDITIONS, TIDY
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import DEFAULT_MESHES, load_meshes
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
@@ -56,6 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m); one camera per --out folder")
     arguments.add_yaw_sd(parser, "one setting per --out folder")
+    parser.add_argument("--conditions", type=arguments.CONDITIONS, default=[TIDY],
+                        help="how fillets lie, comma-separated: " + ", ".join(SWEEP_CONDITIONS) + " (default tidy; "
+                             "docs/results.md, 'The messy line')")
     parser.add_argument("--traces", action="store_true",
                         help="also write Φ, Hu and solidity terms of every window frame per fillet: traces.csv and "
                              "traces/<mesh>_<speed>fpm.png (runs already done without a trace are redone)")
@@ -89,10 +93,11 @@ def run(args: argparse.Namespace) -> int:
         return 2
     done, runs_file = sweep.completed_runs(csv_path, args.lanes, out if args.traces else None)
     runs = sweep.plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, top_camera=args.top_camera,
-                sensor=args.sensor, yaw_sd=args.yaw_sd)
-    todo = [r for r in runs if sweep.run_key(r.mesh, r.k, r.speed_fpm, mass) not in done]
+                      sensor=args.sensor, yaw_sd=args.yaw_sd, conditions=tuple(args.conditions))
+    todo = [r for r in runs if sweep.run_key(r.mesh, r.k, r.speed_fpm, mass, r.condition) not in done]
     where = args.scheduler or f"a local Dask cluster of {min(args.jobs, max(1, len(todo)))} workers"
-    print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds = {len(runs)} runs "
+    print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds x "
+          f"{len(args.conditions)} conditions = {len(runs)} runs "
           f"({len(runs) - len(todo)} already in {csv_path}, {len(todo)} to go), {args.lanes} lanes, "
           f"M = {mass:g} kg, top camera {args.top_camera}, on {where}", file=sys.stderr)
     failed = _evaluate_todo(args, todo, meshes, runs_file)
@@ -190,4 +195,6 @@ def _argv(args: argparse.Namespace) -> list[str]:
         out += ["--sensor", args.sensor]
     if args.yaw_sd:
         out += ["--yaw-sd", f"{args.yaw_sd:g}"]
+    if args.conditions != [TIDY]:
+        out += ["--conditions", ",".join(args.conditions)]
     return out

@@ -1,0 +1,85 @@
+"""Fitting the line's grade: the reject cut and the three-class cuts on ``line_phi``, from experiment rows.
+
+Classes by hinge stiffness k (N m/rad): normal k = 0, moderate 0 < k < 40,
+severe k >= 40. The split is where the line score separates: at 100 FPM the
+k = 10 and 20 fillets score between the normal and the k >= 40 ones, while k
+40 and 100 overlap each other. The reject cut separates normal (k = 0) from
+severe k = 100 fillets, the paper's two classes.
+
+Each cut is fitted between an upper (more compliant) and a lower class: per
+class a least-squares line of ln(score) on the measured speed (m/s, relative
+to 100 FPM) and the blunt-first indicator, and the cut runs between the two
+lines, nearer the class with the smaller residual spread (each class's
+residual sd weighs the other's line), so both classes keep the same margin
+in units of their own spread. A row enters with what the grader measures
+(``speed_mps``, ``leading_end``), never with the simulator's settings.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from woody_common.line import REFERENCE_SPEED_MPS
+from woody_vision.grading import Cut, FilletConditions, GradingRules
+from woody_vision.shape_score import LEADING_BLUNT
+
+NORMAL_K = 0.0
+SEVERE_K = 100.0
+"""The paper's two classes: the reject decision is fitted and scored on them."""
+SEVERE_GRADE_MIN_K = 40.0
+"""Stiffness from which a fillet grades severe; below it (and above 0) moderate."""
+GRADE_NORMAL, GRADE_MODERATE, GRADE_SEVERE = "normal", "moderate", "severe"
+GRADES = (GRADE_NORMAL, GRADE_MODERATE, GRADE_SEVERE)
+
+
+def true_grade(k: float) -> str:
+    """The grade a fillet of stiffness ``k`` should get."""
+    if k <= NORMAL_K:
+        return GRADE_NORMAL
+    return GRADE_SEVERE if k >= SEVERE_GRADE_MIN_K else GRADE_MODERATE
+
+
+def conditions_of(row: dict) -> FilletConditions:
+    """What the grader measured of a row's fillet."""
+    return FilletConditions(float(row["speed_mps"]), row.get("leading_end") == LEADING_BLUNT)
+
+
+def _design(rows: Sequence[dict]) -> np.ndarray:
+    return np.array([[1.0, float(r["speed_mps"]) - REFERENCE_SPEED_MPS, float(conditions_of(r).blunt_first)]
+                     for r in rows])
+
+
+def _class_line(rows: Sequence[dict]) -> tuple[np.ndarray, float]:
+    """Least-squares coefficients of ln(line_phi) on the design, and the residual sd."""
+    x, y = _design(rows), np.log([r["line_phi"] for r in rows])
+    coef = np.linalg.lstsq(x, y, rcond=None)[0]
+    dof = max(1, len(rows) - x.shape[1])
+    return coef, max(float(np.sqrt(np.sum((y - x @ coef) ** 2) / dof)), 1e-6)
+
+
+def fit_cut(upper: Sequence[dict], lower: Sequence[dict]) -> Cut:
+    """The cut between a more compliant (upper) and a stiffer (lower) class of scored rows."""
+    if min(len(upper), len(lower)) < 4:
+        raise ValueError(f"a cut needs at least 4 scored rows per class, got {len(upper)} and {len(lower)}")
+    (up, up_sd), (low, low_sd) = _class_line(upper), _class_line(lower)
+    coef = (up * low_sd + low * up_sd) / (up_sd + low_sd)
+    return Cut(math.exp(coef[0]), float(coef[1]), float(coef[2]))
+
+
+def scored(rows: Sequence[dict]) -> list[dict]:
+    """Rows whose line score was measured."""
+    return [r for r in rows if r.get("status") == "scored" and math.isfinite(r.get("line_phi", math.nan))
+            and math.isfinite(r.get("speed_mps", math.nan))]
+
+
+def fit_rules(rows: Sequence[dict]) -> GradingRules:
+    """The reject cut (k = 0 vs k = 100) and the grade's two cuts, from scored rows of several k."""
+    rows = scored(rows)
+    by_grade = {g: [r for r in rows if true_grade(r["k"]) == g] for g in GRADES}
+    reject = fit_cut(by_grade[GRADE_NORMAL], [r for r in rows if r["k"] == SEVERE_K])
+    moderate = fit_cut(by_grade[GRADE_NORMAL], by_grade[GRADE_MODERATE])
+    severe = fit_cut(by_grade[GRADE_MODERATE], by_grade[GRADE_SEVERE])
+    return GradingRules(reject, moderate, severe)
