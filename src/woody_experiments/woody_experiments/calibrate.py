@@ -12,6 +12,14 @@
    reported on a DISJOINT test mesh set, per speed and lane. The same rows
    give the top-view speed effect (Φ at 130 vs 100 FPM).
 
+3. Line cuts. The line grades ``line_phi`` (woody_vision.shape_score)
+   against cuts that follow the measured speed and leading end
+   (woody_vision.grading.Cut). They are fitted on the calibration meshes on
+   the tidy and the messy line at 90-140 FPM and k ∈ {0, 10, 20, 40, 100}
+   (:mod:`woody_experiments.line_grade`: the reject cut k = 0 vs 100, the
+   grade's normal/moderate and moderate/severe cuts), and reported on the
+   disjoint test meshes per condition and speed.
+
 Unless ``--dry-run`` the values and their provenance (command, date, mesh
 sets, targets, achieved figures) are written to ``config/calibration.yaml``
 (:mod:`woody_common.calibration`), which line_sim, the grader, `woody run`
@@ -41,8 +49,8 @@ from pathlib import Path
 
 import numpy as np
 
-from woody_common.calibration import Calibration, load_calibration, write_calibration
-from woody_experiments import cluster, evaluation, physics_fit
+from woody_common.calibration import CUT_FIELDS, Calibration, load_calibration, write_calibration
+from woody_experiments import cluster, evaluation, line_grade, physics_fit
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, load_meshes
 from woody_experiments.statistics import accuracy, best_threshold, roc
@@ -51,6 +59,10 @@ from woody_sim.meshes import mesh_yaw
 
 SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
 SPEEDS = (100.0, 130.0)
+LINE_SPEEDS = (90.0, 100.0, 115.0, 130.0, 140.0)
+"""The line cuts are fitted over the speeds a line runs at, the paper's two among them."""
+LINE_K = (0.0, 10.0, 20.0, 40.0, 100.0)
+LINE_CONDITIONS = ("tidy", "messy")
 
 
 def _evaluate(runs: list[RunSpec], mesh_spec: str, client, desc: str) -> list[dict]:
@@ -108,6 +120,35 @@ def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict,
     return report
 
 
+def choose_line_cuts(cal_names: list[str], test_names: list[str], physics: dict, args: argparse.Namespace,
+                     client) -> dict:
+    """The line's three cuts on the calibration meshes, and their figures on the held-out ones."""
+    def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
+        runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
+                        friction_static=physics["friction_static"], side=False, condition=c)
+                for n in names for c in LINE_CONDITIONS for s in LINE_SPEEDS for k in LINE_K]
+        return _evaluate(runs, spec, client, desc)
+
+    rules = line_grade.fit_rules(rows_for(cal_names, args.meshes, "line cuts (calibration set)"))
+    cuts = {"line_threshold": rules.threshold, "moderate_threshold": rules.moderate_threshold,
+            "severe_threshold": rules.severe_threshold}
+    for name, cut in cuts.items():
+        print(f"woody calibrate: {name} = {cut.base:.3g} at 100 FPM narrow end first, "
+              f"x exp({cut.speed_slope:+.3g}/(m/s)), x exp({cut.blunt_offset:+.3g}) blunt end first")
+    runs = line_grade.graded_runs(rows_for(test_names, args.test_meshes, "line cuts (held-out test set)"), rules)
+    test = []
+    for condition in LINE_CONDITIONS:
+        for speed in LINE_SPEEDS:
+            summary = line_grade.summarise([r for r in runs if r.condition == condition and r.speed_fpm == speed])
+            test.append({"condition": condition, "speed_fpm": speed, "right": summary.right, "total": summary.total,
+                         "severe_passed": summary.severe_passed, "auc": summary.auc,
+                         "grade_right": summary.grade_right, "grade_total": summary.grade_total})
+            print(f"  held-out {condition} {speed:g} FPM: {summary.right}/{summary.total} normal vs severe, "
+                  f"{summary.severe_passed} severe graded normal, three classes {summary.grade_right}/"
+                  f"{summary.grade_total}")
+    return {"line_cuts": {name: cut.as_list() for name, cut in cuts.items()}, "line_test": test}
+
+
 def _speed_effect(rows: list[dict]) -> dict:
     """Mean Φ per k at 100 and 130 FPM (the paper: every class lower at 130 FPM, k = 0 above all)."""
     out = {}
@@ -146,6 +187,14 @@ def _provenance(args: argparse.Namespace, report: dict) -> dict:
     for t in report.get("test", []):
         if t["lane"] == "all":
             out[f"achieved_heldout_accuracy_{t['speed_fpm']:g}fpm"] = round(t["accuracy"], 4)
+    line = report.get("line_test", [])
+    if line:
+        out["line_conditions"] = ",".join(LINE_CONDITIONS)
+        out["line_speeds_fpm"] = ",".join(f"{s:g}" for s in LINE_SPEEDS)
+        out["achieved_heldout_line_accuracy"] = round(sum(t["right"] for t in line) / sum(t["total"] for t in line), 4)
+        out["achieved_heldout_line_severe_passed"] = sum(t["severe_passed"] for t in line)
+        out["achieved_heldout_three_class_accuracy"] = round(
+            sum(t["grade_right"] for t in line) / sum(t["grade_total"] for t in line), 4)
     return out
 
 
@@ -182,14 +231,16 @@ def calibrate(args: argparse.Namespace, client) -> int:
               f"mu = {physics['friction_static']:g}")
     report["physics"] = physics
     threshold = current.phi_threshold
+    cuts = {name: getattr(current, name) for name in CUT_FIELDS}
     if not args.skip_threshold:
         report.update(choose_threshold(cal_names, test_names, physics, args, client))
-        threshold = report["threshold"]
+        report.update(choose_line_cuts(cal_names, test_names, physics, args, client))
+        threshold, cuts = report["threshold"], report["line_cuts"]
     report["wall_s"] = round(time.perf_counter() - t0, 1)
     (out / "calibration.json").write_text(json.dumps(report, indent=2))
     _write_md(out / "calibration.md", report)
     if not args.dry_run:
-        calibration = Calibration(**physics, phi_threshold=threshold, provenance=_provenance(args, report))
+        calibration = Calibration(**physics, phi_threshold=threshold, **cuts, provenance=_provenance(args, report))
         path = write_calibration(calibration, args.calibration, header=CALIBRATION_HEADER)
         print(f"woody calibrate: wrote {path}")
     return 0
@@ -219,6 +270,14 @@ def _write_md(path: Path, report: dict) -> None:
                   "|---|---|---|---|---|"]
         lines += [f"| {t['speed_fpm']:g} | {t['lane']} | {t['accuracy'] * 100:.1f} % | {t['right']}/{t['total']} | "
                   f"{t['auc']:.3f} |" for t in report["test"]]
+    if "line_test" in report:
+        lines += ["", "Line cuts [base, speed slope, blunt offset]: " + "; ".join(
+            f"{name} {[round(v, 4) for v in cut]}" for name, cut in report["line_cuts"].items()),
+            f"held-out `{report['test_meshes']}`, one vote per run:\n",
+            "| condition | FPM | normal vs severe | severe graded normal | AUC | three classes |",
+            "|---|---|---|---|---|---|"]
+        lines += [f"| {t['condition']} | {t['speed_fpm']:g} | {t['right']}/{t['total']} | {t['severe_passed']} | "
+                  f"{t['auc']:.3f} | {t['grade_right']}/{t['grade_total']} |" for t in report["line_test"]]
     path.write_text("\n".join(lines) + "\n")
 
 

@@ -19,10 +19,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from woody_common.line import REFERENCE_SPEED_MPS
+from woody_experiments.statistics import roc
 from woody_vision.grading import Cut, FilletConditions, GradingRules
 from woody_vision.shape_score import LEADING_BLUNT
 
@@ -83,3 +85,86 @@ def fit_rules(rows: Sequence[dict]) -> GradingRules:
     moderate = fit_cut(by_grade[GRADE_NORMAL], by_grade[GRADE_MODERATE])
     severe = fit_cut(by_grade[GRADE_MODERATE], by_grade[GRADE_SEVERE])
     return GradingRules(reject, moderate, severe)
+
+
+@dataclass(frozen=True)
+class GradedRun:
+    """One run as one vote under the line's rules: the median over its scored lanes."""
+
+    mesh: str
+    k: float
+    speed_fpm: float
+    condition: str
+    score: float
+    """Median ``line_phi`` over the scored lanes."""
+    margin: float
+    """ln(score / reject cut): negative is woody."""
+    label: str
+    grade: str
+
+
+def graded_runs(rows: Sequence[dict], rules: GradingRules) -> list[GradedRun]:
+    """Every run with a scored lane, graded on its median line score and median measured conditions."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in scored(rows):
+        groups.setdefault((r["mesh"], r["k"], r["speed_fpm"], r.get("condition") or "tidy"), []).append(r)
+    out = []
+    for (mesh, k, speed, condition), lanes in sorted(groups.items(), key=lambda kv: str(kv[0])):
+        score = float(np.median([r["line_phi"] for r in lanes]))
+        measured = FilletConditions(float(np.median([r["speed_mps"] for r in lanes])),
+                                    sum(conditions_of(r).blunt_first for r in lanes) * 2 > len(lanes))
+        decision = rules.classify(score, measured)
+        out.append(GradedRun(mesh, k, speed, condition, score, math.log(score / decision.threshold),
+                             decision.label, decision.grade or ""))
+    return out
+
+
+@dataclass(frozen=True)
+class GradeSummary:
+    """The line's figures on a set of runs: the reject decision on k = 0 vs 100, and the three-class grade."""
+
+    normal_right: int
+    normal_total: int
+    severe_right: int
+    severe_total: int
+    auc: float
+    """Of the margin to the reject cut, normal (k = 0) vs severe (k = 100)."""
+    confusion: dict[tuple[str, str], int]
+    """(true grade, graded) -> runs, over every k."""
+    meshes: int
+
+    @property
+    def right(self) -> int:
+        return self.normal_right + self.severe_right
+
+    @property
+    def total(self) -> int:
+        return self.normal_total + self.severe_total
+
+    @property
+    def severe_passed(self) -> int:
+        """Severe (k = 100) runs graded normal: the misses a line cannot afford."""
+        return self.severe_total - self.severe_right
+
+    @property
+    def grade_right(self) -> int:
+        return sum(n for (truth, graded), n in self.confusion.items() if truth == graded)
+
+    @property
+    def grade_total(self) -> int:
+        return sum(self.confusion.values())
+
+
+def summarise(runs: Sequence[GradedRun]) -> GradeSummary:
+    """Reject accuracy, AUC and three-class confusion of graded runs."""
+    normal = [r for r in runs if r.k == NORMAL_K]
+    severe = [r for r in runs if r.k == SEVERE_K]
+    confusion: dict[tuple[str, str], int] = {}
+    for r in runs:
+        key = (true_grade(r.k), r.grade)
+        confusion[key] = confusion.get(key, 0) + 1
+    return GradeSummary(
+        normal_right=sum(r.label == "normal" for r in normal), normal_total=len(normal),
+        severe_right=sum(r.label == "woody" for r in severe), severe_total=len(severe),
+        auc=roc([r.margin for r in normal], [r.margin for r in severe])[2], confusion=confusion,
+        meshes=len({r.mesh for r in runs}))

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from woody_common.calibration import load_calibration
-from woody_experiments import evaluation
+from woody_experiments import evaluation, line_grade
+from woody_experiments.conditions import TIDY
 from woody_experiments.mesh_sets import CALIBRATION_MESHES
 from woody_experiments.paper_targets import (
     ACCURACY_MIN,
@@ -36,8 +37,9 @@ from woody_experiments.paper_targets import (
     PHYSICAL_DELTA_NMDM,
     SPEED_GAIN_MIN,
 )
-from woody_experiments.statistics import accuracy, best_threshold, finite, mean_sd, roc
+from woody_experiments.statistics import accuracy, best_threshold, finite, mean_sd, roc, wilson_interval
 from woody_sim.meshes import load_mesh_set
+from woody_vision.grader_core import calibrated_rules
 
 FULL_GRID_EVALS = 1000 * 6 * 2 * 3
 GOAL_EVALS_PER_MIN = 150.0
@@ -45,7 +47,8 @@ NORMAL_K, SEVERE_K = 0.0, 100.0
 
 PLOTS = ("phi_vs_k.png", "nmdm_vs_k.png", "phi_per_lane.png", "roc.png")
 
-_FLOAT_COLUMNS = ("k", "speed_fpm", "mass", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be")
+_FLOAT_COLUMNS = ("k", "speed_fpm", "mass", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be", "line_phi",
+                  "speed_mps", "yaw_deg", "scale", "blunt_first", "rejected")
 
 
 def load_rows(path: Path) -> list[dict]:
@@ -159,7 +162,9 @@ def _grid(rows: list[dict], threshold: float) -> _Grid:
 def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path:
     """Write out/results.md and out/*.png from out/runs.csv; with ``docs`` also docs/results.md + docs/results/."""
     out = Path(out)
-    grid = _grid(load_rows(out / "runs.csv"), load_calibration().phi_threshold)
+    calibration = load_calibration()
+    rows = load_rows(out / "runs.csv")
+    grid = _grid([r for r in rows if (r.get("condition") or TIDY) == TIDY], calibration.phi_threshold)
     meta = meta or {}
     _plots(grid.rows, out, grid.speeds, grid.ks, grid.lanes, grid.threshold)
     lines = _summary_lines(grid, meta) + _throughput_lines(meta)
@@ -169,7 +174,8 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path
         lines += section_lines
         checks += section_checks
     set_lines, set_checks = evaluation.report(grid.rows, grid.threshold)
-    lines += set_lines + _targets_and_plots(checks + set_checks)
+    lines += set_lines + _line_grade(rows, calibrated_rules(calibration), calibration.provenance)
+    lines += _targets_and_plots(checks + set_checks)
     text = "\n".join(lines) + "\n"
     md = out / "results.md"
     md.write_text(text.replace("{prefix}", ""))
@@ -374,6 +380,50 @@ def _classification(grid: _Grid) -> tuple[list[str], list]:
                                f"{acc * 100:.1f} % ({right}/{total}), AUC {auc:.3f}"))
     L.append("")
     return L, checks
+
+
+def _line_grade(rows: list[dict], rules, provenance: dict) -> list[str]:
+    """The line's grade (line_phi against the calibrated cuts) per condition and speed, one vote per run."""
+    runs = line_grade.graded_runs(rows, rules)
+    if not runs:
+        return []
+    L = ["## The line's grade on a messy line\n",
+         "The grade the line uses: `line_phi` against the calibrated cuts, which follow each fillet's measured speed "
+         "and leading end (`docs/shape-score.md`). Cuts fitted on "
+         f"`{provenance.get('calibration_meshes', '?')}` (conditions {provenance.get('line_conditions', '?')}, "
+         f"{provenance.get('line_speeds_fpm', '?')} FPM); every mesh here is disjoint from them. One vote per run "
+         "(median over its lanes); normal k = 0 vs severe k = 100; three classes normal k = 0 / moderate "
+         "0 < k < 40 / severe k ≥ 40. 95 % Wilson intervals.\n",
+         "| condition | FPM | meshes | normal vs severe | severe graded normal | AUC | three classes |",
+         "|---|---|---|---|---|---|---|"]
+    for condition in dict.fromkeys(r.condition for r in runs):
+        for speed in sorted({r.speed_fpm for r in runs if r.condition == condition}):
+            summary = line_grade.summarise([r for r in runs if r.condition == condition and r.speed_fpm == speed])
+            L.append(f"| {condition} | {speed:g} | {summary.meshes} | {_share(summary.right, summary.total)} | "
+                     f"{summary.severe_passed} of {summary.severe_total} | {summary.auc:.3f} | "
+                     f"{_share(summary.grade_right, summary.grade_total)} |")
+    for condition in dict.fromkeys(r.condition for r in runs):
+        L += _confusion(condition, line_grade.summarise([r for r in runs if r.condition == condition]))
+    return L
+
+
+def _share(right: int, total: int) -> str:
+    if not total:
+        return "—"
+    lo, hi = wilson_interval(right, total)
+    return f"{right / total * 100:.1f} % ({right}/{total}; {lo * 100:.0f}–{hi * 100:.0f} %)"
+
+
+def _confusion(condition: str, summary) -> list[str]:
+    """The three-class confusion matrix of a condition, all its speeds."""
+    if not summary.grade_total:
+        return []
+    L = ["", f"Three classes, {condition} line, all speeds (rows: truth, columns: graded):\n",
+         "| truth \\ graded | " + " | ".join(line_grade.GRADES) + " |", "|---|---|---|---|"]
+    for truth in line_grade.GRADES:
+        L.append(f"| {truth} | " + " | ".join(str(summary.confusion.get((truth, g), 0)) for g in line_grade.GRADES)
+                 + " |")
+    return L + [""]
 
 
 def _targets_and_plots(checks: list) -> list[str]:
