@@ -1,10 +1,24 @@
-"""The report's honesty: line accuracy beside scored accuracy, and the Φ threshold on the plot."""
+"""The report's honesty: line accuracy beside scored accuracy, the Φ threshold on the plot, woody fillets diverted
+or missed per condition, and the three-class grade."""
 
 from __future__ import annotations
 
 import math
 
-from woody_experiments.run_report import Spawn, Verdict, accuracy, accuracy_title, build_report, join, report_threshold
+from woody_experiments.run_report import (
+    UNSCORED_DIVERTED,
+    Spawn,
+    Verdict,
+    accuracy,
+    accuracy_title,
+    build_report,
+    grade_confusion,
+    join,
+    read_csv,
+    report_threshold,
+    verdict_table,
+    write_csv,
+)
 
 
 def rows_with_an_unscored_woody_fillet() -> list[dict]:
@@ -30,3 +44,54 @@ def test_the_report_states_both_accuracies_and_draws_the_graders_threshold(tmp_p
     text = build_report(rows, tmp_path, notes=["skipped mesh x.stl: not a valid STL"]).read_text()
     assert "line accuracy (every fillet; one without a verdict is not diverted): **66.7%**" in text
     assert "accuracy: **100.0%**" in text and "- skipped mesh x.stl: not a valid STL" in text
+
+
+def rows_of_a_messy_line() -> list[dict]:
+    """k 0, 20 and 100 twice; the line's verdict fields; a merged window leaves one woody fillet unscored."""
+    ks = (0.0, 20.0, 100.0, 100.0, 0.0)
+    spawns = [Spawn(sim_id=i, lane=i % 3, mesh="m", k=k, mass=20.0, line_speed=0.508, stamp=i * 0.5,
+                    spawn_x=-1.016) for i, k in enumerate(ks)]
+    decided = [("normal", "normal", 14.0, "narrow"), ("woody", "moderate", 8.0, "blunt"),
+               ("woody", "severe", 3.0, "narrow"), ("unscored", "", math.nan, "blunt"),
+               ("woody", "moderate", 6.5, "blunt")]
+    verdicts = [Verdict(fillet_id=20 + i, lane=i % 3, stamp=i * 0.5 + 2.0, classification=c, grade=g, phi=12.0,
+                        hu_term=0.1, solidity_term=0.01, nmdm=math.nan, mdm=math.nan, be=math.nan, threshold=7.2,
+                        reason="merged with a neighbour at the measuring point" if c == "unscored" else "",
+                        score=score, line_phi=score, line_fraction=0.5, speed=0.51, leading_end=end,
+                        rejected_frames=2 if c == "unscored" else 0)
+                for i, (c, g, score, end) in enumerate(decided)]
+    return join(spawns, verdicts)
+
+
+def test_an_unscored_woody_fillet_is_diverted_when_the_gate_diverts_unscored_ones():
+    rows = rows_of_a_messy_line()
+    kept, diverted = accuracy(rows), accuracy(rows, divert_unscored=True)
+    assert (kept.woody, kept.woody_diverted, diverted.woody_diverted) == (2, 1, 2)
+    assert (diverted.correct, diverted.total) == (2, 5)  # k 20 is normal to the reject decision (woody k >= 50)
+    assert math.isclose(kept.line_accuracy, 2 / 5) and math.isclose(diverted.line_accuracy, 3 / 5)
+    assert rows[3]["true_grade"] == "severe" and rows[1]["true_grade"] == "moderate"
+    assert grade_confusion(rows) == {("normal", "normal"): 1, ("moderate", "moderate"): 1,
+                                     ("severe", "severe"): 1, ("severe", "unscored"): 1,
+                                     ("normal", "moderate"): 1}
+
+
+def test_the_report_and_csv_carry_the_line_fields_grades_and_diversions(tmp_path):
+    rows = rows_of_a_messy_line()
+    text = build_report(rows, tmp_path, run_info={UNSCORED_DIVERTED: True}).read_text()
+    assert "- diverted 2 of 2 woody fillets (diverted: graded woody, or unscored (reject_gate diverts" in text
+    assert "- correct verdicts (normal/woody as the truth): 2 of 5 fillets" in text
+    assert "| 100 FPM, blunt first | 1 | 1 | – |" in text and "| 100 FPM, narrow first | 1 | 1 | – |" in text
+    assert "| truth \\ graded | normal | moderate | severe | unscored |" in text
+    assert "| normal | 1 | 1 | 0 | 0 |" in text and "| severe | 0 | 0 | 1 | 1 |" in text
+    assert "23: merged with a neighbour at the measuring point" in text
+    kept = build_report(rows, tmp_path / "kept").read_text()  # a run that does not say: unscored ones pass
+    assert "| 100 FPM, blunt first | 1 | 0 | 23 (unscored, -) |" in kept
+    back = read_csv(write_csv(rows, tmp_path / "verdicts.csv"))
+    assert [r["leading_end"] for r in back] == ["narrow", "blunt", "narrow", "blunt", "blunt"]
+    assert back[2]["score"] == 3.0 and back[2]["line_phi"] == 3.0 and back[2]["measured_speed_mps"] == 0.51
+    assert back[3]["rejected_frames"] == 2.0 and back[3]["true_grade"] == "severe"
+    table = verdict_table(rows).splitlines()
+    assert table[0].split()[-6:] == ["line_phi", "phi", "grade", "verdict", "truth", "reason"]
+    assert "v (m/s)" in table[0] and "lead" in table[0] and table[4].endswith(
+        "merged with a neighbour at the measuring point")
+    assert "severe" in table[3] and "blunt" in table[2]

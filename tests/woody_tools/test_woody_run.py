@@ -207,3 +207,70 @@ def test_a_run_on_an_exported_domain_with_other_nodes_refuses(tmp_path):
     lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
     assert len(lines) == 1 and "already has nodes (/someone_elses_node)" in lines[0], lines
     assert not (tmp_path / "run").exists()
+
+
+# ---------------------------------------------------------------- a messy, crowded line: options reach the nodes
+
+@pytest.mark.parametrize("args,message", [
+    (["--line", "wobbly"], "--line must be one of tidy|messy, got 'wobbly'"),
+    (["--yaw-sd", "50"], "--yaw-sd must be within 0..45 deg, got 50"),
+    (["--yaw-max", "nan"], "--yaw-max must be within 0..45 deg, got nan"),
+    (["--blunt-fraction", "1.5"], "--blunt-fraction must be within 0..1, got 1.5"),
+    (["--lateral-sd", "0.06"], "--lateral-sd must be within 0..0.05 m, got 0.06"),
+    (["--scale", "0.9"], "--scale must be MIN,MAX with 0.5 <= MIN <= MAX <= 1.5, got '0.9'"),
+    (["--scale", "1.2,0.9"], "--scale must be MIN,MAX with 0.5 <= MIN <= MAX <= 1.5, got '1.2,0.9'"),
+    (["--lane-pitch", "0.05"], "--lane-pitch: lane pitch must be at least 0.08 m, got 0.05"),
+    (["--lanes", "6", "--lane-pitch", "0.2"], "use a lane pitch of at most 0.173 m"),
+    (["--lane-pitch", "0.08", "--lateral-max", "0.05"], "--lateral-max at most 0.04 m"),
+    (["--spacing", "0.1"], "--spacing must be within 0.15..10 m"),
+    (["--spacing", "0.3", "--fillets-per-minute", "100"], "--spacing and --fillets-per-minute both set"),
+    (["--fillets-per-minute", "250"], "--fillets-per-minute must be in (0, 203.2] at 100 FPM"),
+    (["--speed-fpm", "130", "--fillets-per-minute", "250", "--speed-change", "100@5"],
+     "--fillets-per-minute must be in (0, 203.2] at 100 FPM"),  # the rate must hold after the change too
+    (["--speed-change", "100"], "--speed-change must be FPM@SECONDS"),
+    (["--speed-change", "500@3"], "--speed-change must be FPM@SECONDS with FPM in [1, 400]"),
+    (["--score", "both"], "--score must be one of line|paper, got 'both'"),
+    (["--threshold", "0"], "--threshold must be in (0, 1000], got 0"),
+])
+def test_bad_line_options_are_refused_before_any_node_starts(tmp_path, args, message):
+    result = woody_run("--fillets", "1", "--out", str(tmp_path / "run"), *args, timeout=60)
+    lines = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")]
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0].startswith("woody run: ") and message in lines[0], lines
+    assert not (tmp_path / "run").exists()
+
+
+def _parameters(*argv: str) -> dict[str, dict]:
+    from woody_tools.cli import build_parser
+    from woody_tools.commands.run import checked
+    from woody_tools.line_run import node_parameters
+
+    args = checked(build_parser("run").parse_args(["run", *argv]))
+    return node_parameters(args, 12, Path("/tmp/unused"))
+
+
+def test_a_messy_crowded_line_reaches_line_sim_segmenter_and_grader():
+    params = _parameters("--lanes", "6", "--speed-fpm", "130", "--line", "messy", "--yaw-sd", "10",
+                         "--scale", "0.9,1.1", "--lane-pitch", "0.12", "--spacing", "0.24",
+                         "--speed-change", "90@4", "--threshold", "8.5")
+    sim = params["line_sim"]
+    assert sim["line"] == "messy" and sim["yaw_sd_deg"] == 10.0 and "blunt_fraction" not in sim  # the preset's
+    assert (sim["scale_min"], sim["scale_max"], sim["spawn_spacing_m"]) == (0.9, 1.1, 0.24)
+    assert (sim["speed_change_fpm"], sim["speed_change_at_s"], sim["line_speed_fpm"]) == (90.0, 4.0, 130.0)
+    assert sim["lane_pitch_m"] == params["segmenter"]["lane_pitch_m"] == 0.12
+    assert params["grader"]["line_threshold"] == [8.5, 0.0, 0.0] and "threshold" not in params["grader"]
+    assert params["reject_gate"]["divert_unscored"] is True
+    settings = json.loads(params["recorder"]["run_settings"])
+    assert settings["line conditions"].startswith("messy: yaw sd 10 deg (max 35), 0.5 blunt end first")
+    assert settings["speed change"] == "to 90 FPM at 4 s" and settings["unscored fillets diverted"] is True
+
+
+def test_defaults_keep_the_tidy_line_and_a_paper_threshold_goes_to_the_paper_rule():
+    params = _parameters("--fillets-per-minute", "145", "--score", "paper", "--threshold", "11")
+    sim = params["line_sim"]
+    assert sim["line"] == "tidy" and sim["fillets_per_minute"] == 145.0 and "spawn_spacing_m" not in sim
+    assert "speed_change_fpm" not in sim and sim["lane_pitch_m"] == params["segmenter"]["lane_pitch_m"] == 0.16
+    assert params["grader"]["score"] == "paper" and params["grader"]["threshold"] == 11.0
+    assert "line_threshold" not in params["grader"]
+    for speed in ("90", "140"):  # any speed of a real line
+        assert _parameters("--speed-fpm", speed)["line_sim"]["line_speed_fpm"] == float(speed)

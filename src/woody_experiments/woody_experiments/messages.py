@@ -31,7 +31,9 @@ def verdict_from_msg(msg) -> Verdict:
     return Verdict(fillet_id=msg.fillet_id, lane=msg.lane, stamp=stamp_to_seconds(msg.header.stamp),
                    classification=classes.get(msg.classification, "unscored"), grade=msg.grade, phi=msg.phi,
                    hu_term=msg.hu_term, solidity_term=msg.solidity_term, nmdm=msg.nmdm, mdm=msg.mdm, be=msg.be,
-                   reason=msg.unscored_reason, threshold=msg.threshold)
+                   reason=msg.unscored_reason, threshold=msg.threshold, score=msg.score, line_phi=msg.line_phi,
+                   line_fraction=msg.line_fraction, speed=msg.speed, leading_end=msg.leading_end,
+                   rejected_frames=int(msg.rejected_frames))
 
 
 def rows_from_bag(path: Path, woody_k: float = 50.0) -> tuple[list[dict], str | None]:

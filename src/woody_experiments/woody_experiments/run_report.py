@@ -14,13 +14,20 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from woody_common.line import FPM_TO_MPS
+from woody_experiments.line_grade import GRADES, true_grade
 
 VERDICT_COLUMNS = [
     "fillet_id", "lane", "mesh", "k", "speed_fpm", "phi", "hu_term", "solidity_term",
     "nmdm", "mdm", "be", "verdict", "grade", "truth", "sim_id", "mass", "spawn_time", "verdict_time", "reason",
-    "threshold",
+    "threshold", "score", "line_phi", "measured_speed_mps", "leading_end", "rejected_frames", "true_grade",
 ]
-"""Columns of verdicts.csv: the issue's twelve first, then what an analyst needs to audit a row."""
+"""Columns of verdicts.csv: the paper's twelve first, then what an analyst needs to audit a row: the score the
+verdict used, the line score, the fillet's measured speed and leading end, the window frames rejected as merged
+with a neighbour, and the grade its stiffness should get (woody_experiments.line_grade.true_grade)."""
+NUMERIC_COLUMNS = {"k", "speed_fpm", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be", "mass", "spawn_time",
+                   "verdict_time", "threshold", "score", "line_phi", "measured_speed_mps", "rejected_frames"}
+UNSCORED_DIVERTED = "unscored fillets diverted"
+"""Run setting (report.md's table, the bag's ``woody.run`` record): reject_gate's ``divert_unscored``."""
 
 MATCH_TOLERANCE_S = 0.6
 """A verdict belongs to a spawned fillet when it closes this close to the expected edge crossing."""
@@ -62,6 +69,14 @@ class Verdict:
     be: float
     reason: str = ""
     threshold: float = float("nan")
+    score: float = float("nan")
+    """The score the classification used (line_phi, or phi with the paper's rule)."""
+    line_phi: float = float("nan")
+    line_fraction: float = float("nan")
+    speed: float = float("nan")
+    """The fillet's speed measured in the top image (m/s)."""
+    leading_end: str = ""
+    rejected_frames: int = 0
 
 
 def truth_of(k: float, woody_k: float) -> str:
@@ -95,15 +110,18 @@ def _row(spawn: Spawn | None, verdict: Verdict | None, woody_k: float) -> dict:
     if spawn is not None:
         row.update(sim_id=spawn.sim_id, lane=spawn.lane, mesh=spawn.mesh, k=spawn.k, mass=spawn.mass,
                    speed_fpm=round(spawn.line_speed / FPM_TO_MPS, 3), spawn_time=round(spawn.stamp, 4),
-                   truth=truth_of(spawn.k, woody_k))
+                   truth=truth_of(spawn.k, woody_k), true_grade=true_grade(spawn.k))
     if verdict is None:
         row.update(fillet_id="", phi=nan, hu_term=nan, solidity_term=nan, nmdm=nan, mdm=nan, be=nan, threshold=nan,
+                   score=nan, line_phi=nan, measured_speed_mps=nan, rejected_frames=nan,
                    verdict="missing", reason="no verdict was published for this fillet")
         return row
     row.update(fillet_id=verdict.fillet_id, lane=verdict.lane, phi=verdict.phi, hu_term=verdict.hu_term,
                solidity_term=verdict.solidity_term, nmdm=verdict.nmdm, mdm=verdict.mdm, be=verdict.be,
                verdict=verdict.classification, grade=verdict.grade, verdict_time=round(verdict.stamp, 4),
-               threshold=verdict.threshold,
+               threshold=verdict.threshold, score=verdict.score, line_phi=verdict.line_phi,
+               measured_speed_mps=verdict.speed, leading_end=verdict.leading_end,
+               rejected_frames=verdict.rejected_frames,
                reason=verdict.reason if verdict.reason else ("" if spawn else "no spawned fillet matches"))
     return row
 
@@ -127,8 +145,7 @@ def _fmt(value: object) -> object:
 
 def read_csv(path: Path) -> list[dict]:
     """Rows of a verdicts.csv, numbers parsed back (empty cells → NaN)."""
-    numeric = {"k", "speed_fpm", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be", "mass",
-               "spawn_time", "verdict_time", "threshold"}
+    numeric = NUMERIC_COLUMNS
     with Path(path).open(newline="") as handle:
         reader = csv.DictReader(handle)
         missing = {"fillet_id", "lane", "k", "phi", "verdict"} - set(reader.fieldnames or [])
@@ -152,6 +169,11 @@ class Accuracy:
     missing: int
     confusion: dict[tuple[str, str], int]
     line_correct: int = 0
+    woody: int = 0
+    """Fillets woody by ground truth."""
+    woody_diverted: int = 0
+    """Of them, diverted: graded woody, or unscored while reject_gate diverts unscored fillets."""
+    divert_unscored: bool = False
 
     @property
     def accuracy(self) -> float:
@@ -159,16 +181,25 @@ class Accuracy:
         return self.correct / self.scored if self.scored else float("nan")
 
     @property
+    def total(self) -> int:
+        return self.scored + self.unscored + self.missing
+
+    @property
     def line_accuracy(self) -> float:
-        """Over every fillet on the line: one without a normal/woody verdict is not diverted, i.e. passes as normal."""
-        total = self.scored + self.unscored + self.missing
-        return self.line_correct / total if total else float("nan")
+        """Over every fillet on the line: diverted (graded woody, or unscored with ``divert_unscored``) is right
+        for a woody fillet, passed is right for a normal one; a fillet without a verdict passes."""
+        return self.line_correct / self.total if self.total else float("nan")
 
 
-def accuracy(rows: Sequence[dict]) -> Accuracy:
+def diverted(row: dict, divert_unscored: bool) -> bool:
+    """Whether reject_gate diverts the row's fillet: graded woody, or unscored when it diverts those."""
+    return row["verdict"] == "woody" or (divert_unscored and row["verdict"] not in ("normal", "woody", "missing"))
+
+
+def accuracy(rows: Sequence[dict], divert_unscored: bool = False) -> Accuracy:
     """Accuracy of normal/woody verdicts against ground truth, over the scored fillets and over the whole line."""
     confusion = {(t, p): 0 for t in ("normal", "woody") for p in ("normal", "woody")}
-    scored = correct = unscored = missing = line_correct = 0
+    scored = correct = unscored = missing = line_correct = woody = woody_diverted = 0
     for row in rows:
         if not row.get("truth"):
             continue
@@ -180,8 +211,48 @@ def accuracy(rows: Sequence[dict]) -> Accuracy:
             scored += 1
             correct += row["verdict"] == row["truth"]
             confusion[(row["truth"], row["verdict"])] += 1
-        line_correct += (row["verdict"] == "woody") == (row["truth"] == "woody")
-    return Accuracy(scored, correct, unscored, missing, confusion, line_correct)
+        out = diverted(row, divert_unscored)
+        line_correct += out == (row["truth"] == "woody")
+        woody += row["truth"] == "woody"
+        woody_diverted += out and row["truth"] == "woody"
+    return Accuracy(scored, correct, unscored, missing, confusion, line_correct, woody, woody_diverted,
+                    divert_unscored)
+
+
+def grade_confusion(rows: Sequence[dict]) -> dict[tuple[str, str], int]:
+    """(true grade from k, grade published) -> fillets; a fillet without a grade counts under its verdict
+    (unscored, missing) or as "no grade" (the paper's rule grades none)."""
+    confusion: dict[tuple[str, str], int] = {}
+    for row in rows:
+        if not row.get("true_grade"):
+            continue
+        if row["verdict"] in ("normal", "woody"):
+            graded = row.get("grade") or "no grade"
+        else:
+            graded = row["verdict"]
+        key = (row["true_grade"], graded)
+        confusion[key] = confusion.get(key, 0) + 1
+    return confusion
+
+
+def diversion_by_condition(rows: Sequence[dict], divert_unscored: bool) -> list[tuple[str, int, int, list[str]]]:
+    """Per condition (line speed at spawn, leading end the grader measured): (condition, woody fillets, diverted,
+    the missed ones as "fillet id (verdict, score)")."""
+    groups: dict[str, list[dict]] = {}
+    for row in rows:
+        if row.get("truth") != "woody":
+            continue
+        end = row.get("leading_end") or "end unknown"
+        speed = row.get("speed_fpm")
+        key = f"{speed:g} FPM, {end} first" if isinstance(speed, float) else f"{end} first"
+        groups.setdefault(key, []).append(row)
+    out = []
+    for key in sorted(groups):
+        group = groups[key]
+        missed = [f"{r.get('fillet_id') or r.get('sim_id')} ({r['verdict']}, {_cell(r.get('score'))})"
+                  for r in group if not diverted(r, divert_unscored)]
+        out.append((key, len(group), len(group) - len(missed), missed))
+    return out
 
 
 def accuracy_title(acc: Accuracy) -> str:
@@ -193,27 +264,37 @@ def accuracy_title(acc: Accuracy) -> str:
 
 
 def report_threshold(rows: Sequence[dict], run_info: dict | None) -> float | None:
-    """The Φ threshold the grader used (from its verdicts), else the one in the run settings."""
+    """The reject cut the grader used (from its verdicts; the lowest where it follows speed and leading end), else
+    the one in the run settings."""
     used = sorted({r["threshold"] for r in rows if isinstance(r.get("threshold"), float)
                    and not math.isnan(r["threshold"])})
     return used[0] if used else _first_float(run_info, "threshold")
 
 
+TABLE_COLUMNS = [("fillet_id", 9), ("lane", 4), ("mesh", 14), ("k", 5), ("speed_fpm", 9),
+                 ("measured_speed_mps", 8), ("leading_end", 6), ("score", 6), ("line_phi", 8), ("phi", 6),
+                 ("grade", 8), ("verdict", 8), ("truth", 6)]
+"""The terminal table's columns and widths; the reason of an unscored or missing fillet follows the row."""
+TABLE_HEADINGS = {"measured_speed_mps": "v (m/s)", "leading_end": "lead", "speed_fpm": "FPM"}
+
+
 def verdict_table(rows: Sequence[dict], limit: int = 40) -> str:
-    """A fixed-width table of the main columns for the terminal."""
-    columns = ["fillet_id", "lane", "mesh", "k", "speed_fpm", "phi", "nmdm", "verdict", "truth"]
-    lines = ["  ".join(f"{c:>9}" for c in columns)]
+    """A fixed-width table of the main columns for the terminal: the score, line score, measured speed and leading
+    end of each verdict, its grade and, for a fillet without a normal/woody verdict, why."""
+    lines = ["  ".join(f"{TABLE_HEADINGS.get(c, c):>{w}}" for c, w in TABLE_COLUMNS) + "  reason"]
     for row in rows[:limit]:
-        cells = []
-        for c in columns:
-            value = row.get(c, "")
-            if isinstance(value, float):
-                value = "-" if math.isnan(value) else f"{value:.3g}"
-            cells.append(f"{str(value)[:9]:>9}")
-        lines.append("  ".join(cells))
+        cells = [f"{_cell(row.get(c, ''))[:w]:>{w}}" for c, w in TABLE_COLUMNS]
+        reason = row.get("reason", "") if row.get("verdict") not in ("normal", "woody") else ""
+        lines.append("  ".join(cells) + (f"  {reason}" if reason else ""))
     if len(rows) > limit:
         lines.append(f"... {len(rows) - limit} more rows")
     return "\n".join(lines)
+
+
+def _cell(value: object) -> str:
+    if isinstance(value, float):
+        return "-" if math.isnan(value) else f"{value:.3g}"
+    return str("" if value is None else value)
 
 
 def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody line run",
@@ -228,7 +309,8 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
     matplotlib.use("Agg")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    acc = accuracy(rows)
+    divert_unscored = unscored_diverted(run_info)
+    acc = accuracy(rows, divert_unscored)
     scored = [r for r in rows if r["verdict"] in ("normal", "woody") and r.get("k") != ""]
     _plot_phi(scored, report_threshold(rows, run_info), out_dir / "phi_by_k_lane.png")
     side = [r for r in scored if isinstance(r.get("nmdm"), float) and not math.isnan(r["nmdm"])]
@@ -244,6 +326,41 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
     return path
 
 
+def unscored_diverted(run_info: dict | None) -> bool:
+    """Whether the run's reject_gate diverted unscored fillets (its setting in the run's table); False when the
+    run does not say (a verdict table alone, an older bag): an unscored fillet then counts as passed."""
+    value = (run_info or {}).get(UNSCORED_DIVERTED, False)
+    return value is True or str(value).lower() == "true"
+
+
+def _line_sections(rows: Sequence[dict], acc: Accuracy) -> list[str]:
+    """Woody fillets diverted or missed per condition, and the three-class grade's confusion matrix."""
+    rule = "graded woody, or unscored" + (" (reject_gate diverts unscored fillets)" if acc.divert_unscored
+                                         else "; unscored ones pass (divert_unscored off or not recorded)")
+    lines = ["## Woody fillets diverted", "",
+             f"- diverted {acc.woody_diverted} of {acc.woody} woody fillets (diverted: {rule})",
+             f"- correct verdicts (normal/woody as the truth): {acc.correct} of {acc.total} fillets", "",
+             "| condition | woody fillets | diverted | missed (verdict, score) |", "|---|---|---|---|"]
+    lines += [f"| {key} | {n} | {n_out} | {', '.join(missed) or '–'} |"
+              for key, n, n_out, missed in diversion_by_condition(rows, acc.divert_unscored)]
+    confusion = grade_confusion(rows)
+    graded = list(GRADES) + sorted({g for _, g in confusion} - set(GRADES))
+    right = sum(n for (t, g), n in confusion.items() if t == g)
+    total = sum(confusion.values())
+    lines += ["", "## Three-class grade", "",
+              "Truth from the stiffness: normal k = 0, moderate 0 < k < 40, severe k >= 40.", "",
+              f"- graded right: {right} of {total}" + (f" (**{right / total:.1%}**)" if total else ""), "",
+              "| truth \\ graded | " + " | ".join(graded) + " |", "|---" * (len(graded) + 1) + "|"]
+    for truth in GRADES:
+        if any(t == truth for t, _ in confusion):
+            lines.append(f"| {truth} | " + " | ".join(str(confusion.get((truth, g), 0)) for g in graded) + " |")
+    unscored = [f"{r.get('fillet_id') or r.get('sim_id')}: {r.get('reason') or r['verdict']}" for r in rows
+                if r.get("truth") and r["verdict"] not in ("normal", "woody")]
+    if unscored:
+        lines += ["", "Without a normal/woody verdict: " + "; ".join(unscored)]
+    return lines + [""]
+
+
 def _groups(rows: Sequence[dict]) -> tuple[list[float], list[int]]:
     return sorted({float(r["k"]) for r in rows}), sorted({int(r["lane"]) for r in rows})
 
@@ -257,21 +374,27 @@ def _plot_phi(scored: Sequence[dict], threshold: float | None, path: Path) -> No
     width = 0.8 / max(len(lanes), 1)
     for j, lane in enumerate(lanes):
         for i, k in enumerate(ks):
-            values = [r["phi"] for r in scored if float(r["k"]) == k and int(r["lane"]) == lane]
+            values = [graded_score(r) for r in scored if float(r["k"]) == k and int(r["lane"]) == lane]
             x = i + (j - (len(lanes) - 1) / 2) * width
             ax.scatter(np.full(len(values), x), values, s=14, color=f"C{j}", label=f"lane {lane}" if i == 0 else None)
             if values:
                 ax.hlines(np.mean(values), x - width / 2, x + width / 2, color=f"C{j}")
     if threshold is not None:
-        ax.axhline(threshold, color="k", ls="--", lw=0.8, label=f"threshold {threshold:g} (below: woody)")
+        ax.axhline(threshold, color="k", ls="--", lw=0.8, label=f"reject cut {threshold:.3g} (below: woody)")
     ax.set_xticks(range(len(ks)), [f"k={k:g}" for k in ks])
-    ax.set_ylabel("shape score Φ")
-    ax.set_title("Φ per stiffness and lane")
+    ax.set_ylabel("score the verdict used (line_phi, or Φ)")
+    ax.set_title("score per stiffness and lane")
     if lanes or threshold is not None:
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def graded_score(row: dict) -> float:
+    """The score the row's verdict used (``score``), or the paper's Φ for a row that does not carry one."""
+    score = row.get("score")
+    return score if isinstance(score, float) and math.isfinite(score) else row["phi"]
 
 
 def _plot_nmdm(side: Sequence[dict], path: Path) -> None:
@@ -316,22 +439,26 @@ def _plot_confusion(acc: Accuracy, path: Path) -> None:
 
 def _markdown_body(rows: Sequence[dict], scored: Sequence[dict], side: Sequence[dict], acc: Accuracy) -> list[str]:
     ks, lanes = _groups(scored)
-    line = f"**{acc.line_accuracy:.1%}**" if acc.scored + acc.unscored + acc.missing else "n/a"
+    line = f"**{acc.line_accuracy:.1%}**" if acc.total else "n/a"
+    passed = ("an unscored one is diverted, one without a verdict" if acc.divert_unscored
+              else "one without a verdict")
     lines = [
         "## Accuracy against ground truth", "",
-        f"- line accuracy (every fillet; one without a verdict is not diverted): {line}",
+        f"- line accuracy (every fillet; {passed} is not diverted): {line}",
         f"- scored fillets: {acc.scored}, correct: {acc.correct}, accuracy: "
         + (f"**{acc.accuracy:.1%}**" if acc.scored else "n/a"),
         f"- unscored (window never closed cleanly): {acc.unscored}; no verdict at all: {acc.missing}", "",
-        "![confusion](confusion.png)", "",
+        "![confusion](confusion.png)", "", *_line_sections(rows, acc),
         "## Shape score Φ per stiffness and lane", "",
-        "| k | lane | n | Φ mean ± sd | Hu term | solidity term |", "|---|---|---|---|---|---|",
+        "| k | lane | n | Φ mean ± sd | line_phi mean ± sd | Hu term | solidity term |",
+        "|---|---|---|---|---|---|---|",
     ]
     for k in ks:
         for lane in lanes:
             group = [r for r in scored if float(r["k"]) == k and int(r["lane"]) == lane]
             if group:
                 lines.append(f"| {k:g} | {lane} | {len(group)} | {_mean_sd([r['phi'] for r in group])} | "
+                             f"{_mean_sd([r.get('line_phi', math.nan) for r in group])} | "
                              f"{_mean_sd([r['hu_term'] for r in group], 3)} | "
                              f"{_mean_sd([r['solidity_term'] for r in group], 4)} |")
     lines += ["", "![phi](phi_by_k_lane.png)", "", "## Side view (watched lane)", "",

@@ -20,12 +20,23 @@ from datetime import datetime
 from pathlib import Path
 
 from woody_common import topics
+from woody_common.line import fpm_to_mps, spacing_at_rate
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.messages import spawn_from_msg, verdict_from_msg
-from woody_experiments.run_report import Spawn, Verdict, build_report, join, verdict_table, write_csv
+from woody_experiments.run_report import (
+    UNSCORED_DIVERTED,
+    Spawn,
+    Verdict,
+    build_report,
+    join,
+    verdict_table,
+    write_csv,
+)
+from woody_sim.line_conditions import LineConditions, longest_placed_length
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_tools.cpu_usage import CpuAccounting
 from woody_tools.processes import DomainInUse, NodeProcess, lease_domain
+from woody_vision.grader_core import SCORE_LINE
 from woody_vision.segmentation import REAL_CAMERA_FILTERS
 
 MAX_LEAD_S = 0.1
@@ -57,9 +68,9 @@ def _claim_out(out: Path, force: bool):
     return lock
 
 
-def _check_meshes(spec: str) -> list[str]:
-    """One line per mesh file of ``spec`` that line_sim would skip or convert, checked here so the terminal
-    and report.md name them (line_sim only logs them)."""
+def _check_meshes(spec: str) -> tuple[list, list[str]]:
+    """The loadable meshes of ``spec``, and one line per mesh file that line_sim would skip or convert, checked
+    here so the terminal and report.md name them (line_sim only logs them)."""
     import warnings
 
     from woody_sim.meshes import MeshWarning, load_mesh_set
@@ -73,7 +84,23 @@ def _check_meshes(spec: str) -> list[str]:
     if not meshes:
         raise RunRefused(f"--meshes {spec}: no loadable mesh ({'; '.join(errors)})")
     converted = [f"converted mesh {w.message}" for w in caught if issubclass(w.category, MeshWarning)]
-    return [f"skipped mesh {line}" for line in errors] + converted
+    return meshes, [f"skipped mesh {line}" for line in errors] + converted
+
+
+def _crowding_notes(meshes: list, args: argparse.Namespace) -> list[str]:
+    """The note line_sim logs when fillets of a lane may overlap (spacing below the longest placed fillet)."""
+    speeds = dict.fromkeys((args.speed_fpm, args.speed_change_fpm or args.speed_fpm))
+    if args.fillets_per_minute is not None:
+        spacing = min(spacing_at_rate(fpm_to_mps(fpm), args.fillets_per_minute) for fpm in speeds)
+    elif args.spacing is not None:
+        spacing = args.spacing
+    else:
+        return []
+    longest = longest_placed_length(meshes, args.conditions)
+    if spacing >= longest:
+        return []
+    return [f"in-lane spacing {spacing:.3f} m is below the longest placed fillet ({longest:.3f} m): fillets of a "
+            f"lane may overlap (they do not collide)"]
 
 
 class LineMonitor:
@@ -145,15 +172,30 @@ class LineMonitor:
         rclpy.try_shutdown(context=self.context)
 
 
+def describe_conditions(c: LineConditions) -> str:
+    """A line's placement numbers in one phrase (help texts, the report's settings)."""
+    return (f"yaw sd {c.yaw_sd_deg:g} deg (max {c.yaw_max_deg:g}), {c.blunt_fraction:g} blunt end first, lateral "
+            f"sd {c.lateral_sd_m:g} m (max {c.lateral_max_m:g}), size x{c.scale_min:g}-{c.scale_max:g}")
+
+
 def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, object]:
     """The run's settings as report.md's table shows them; the recorder keeps them in the bag (``woody.run``)."""
+    if args.fillets_per_minute is not None:
+        spacing = f"{args.fillets_per_minute:g} fillets per minute per lane"
+    else:
+        spacing = "line_sim default" if args.spacing is None else args.spacing
     return {"lanes": args.lanes, "line speed (FPM)": args.speed_fpm,
             "stiffness mix k": ", ".join(f"{k:g}" for k in args.k), "meshes": args.meshes, "seed": args.seed,
             "fillets requested": fillets or f"{args.duration:g} s of spawning",
+            "score": args.score or f"grader default ({SCORE_LINE})",
             "threshold": "grader default" if args.threshold is None else args.threshold,
             "side camera (Hz)": args.side_rate, "paced to wall clock": args.realtime, "top camera model": args.sensor,
-            "top camera geometry": args.top_camera, "fillets turned (yaw sd, deg)": args.yaw_sd,
-            "namespace": args.namespace or "/"}
+            "top camera geometry": args.top_camera,
+            "line conditions": f"{args.line}: {describe_conditions(args.conditions)}",
+            "lane pitch (m)": args.lane_pitch_m, "in-lane spacing (m)": spacing,
+            "speed change": (f"to {args.speed_change_fpm:g} FPM at {args.speed_change_at:g} s"
+                             if args.speed_change_fpm else "none"),
+            UNSCORED_DIVERTED: True, "namespace": args.namespace or "/"}
 
 
 def run_checked(args: argparse.Namespace) -> int:
@@ -161,7 +203,8 @@ def run_checked(args: argparse.Namespace) -> int:
     written (`RunRefused`)."""
     fillets = args.fillets if args.fillets is not None or args.duration is not None else 12
     out = Path(args.out) if args.out else Path("bags") / datetime.now().strftime("run-%Y%m%d-%H%M%S")
-    mesh_notes = _check_meshes(args.meshes)
+    meshes, mesh_notes = _check_meshes(args.meshes)
+    mesh_notes += _crowding_notes(meshes, args)
     try:
         lease = lease_domain(share=args.share_domain)
     except (DomainInUse, ValueError) as exc:
@@ -200,31 +243,63 @@ def _refuse_foreign_nodes(monitor: LineMonitor, domain_id: int, seconds: float =
                          "would mix with them. Unset ROS_DOMAIN_ID to get a private domain, or pass --share-domain")
 
 
-def _start_nodes(args: argparse.Namespace, fillets: int | None, out: Path, domain_id: int) -> list[NodeProcess]:
-    """Recorder first (it must see every topic from the start), line_sim last (it waits for the vision nodes)."""
-    sim_params: dict[str, object] = {
-        "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
-        "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
-        "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
-        "max_lead_s": MAX_LEAD_S, "top_camera": args.top_camera, "sensor": args.sensor, "yaw_sd_deg": args.yaw_sd,
-    }
+def node_parameters(args: argparse.Namespace, fillets: int | None, out: Path) -> dict[str, dict[str, object]]:
+    """Each node's parameters for checked arguments, in start order: recorder first (it must see every topic
+    from the start), line_sim last (it waits for the vision nodes)."""
     camera_height = LineGeometry(**top_camera_preset(args.top_camera)).top_height
     vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes, "camera_height_m": camera_height}
-    segmenter_params = dict(vision_params, **({} if args.sensor == "ideal" else REAL_CAMERA_FILTERS))
-    grader_params = dict(vision_params)
-    if args.threshold is not None:
-        grader_params["threshold"] = args.threshold
-    settings = json.dumps(run_settings(args, fillets))
+    return {
+        "recorder": {"use_sim_time": True, "output": str(out / "line.mcap"),
+                     "run_settings": json.dumps(run_settings(args, fillets)), **_recorded(args.namespace)},
+        "segmenter": dict(vision_params, lane_pitch_m=args.lane_pitch_m,
+                          **({} if args.sensor == "ideal" else REAL_CAMERA_FILTERS)),
+        "grader": _grader_params(args, vision_params),
+        "reject_gate": {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm,
+                        "divert_unscored": True},
+        "line_sim": _sim_params(args, fillets),
+    }
+
+
+def _start_nodes(args: argparse.Namespace, fillets: int | None, out: Path, domain_id: int) -> list[NodeProcess]:
+    """The nodes of :func:`node_parameters`, started in its order; line_sim and the grader load --calibration
+    first, so the parameters given here win."""
     nodes: list[NodeProcess] = []
-    for name, params in (("recorder", {"use_sim_time": True, "output": str(out / "line.mcap"),
-                                       "run_settings": settings, **_recorded(args.namespace)}),
-                         ("segmenter", segmenter_params), ("grader", grader_params),
-                         ("reject_gate", {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm}),
-                         ("line_sim", sim_params)):
+    for name, params in node_parameters(args, fillets, out).items():
         calibration = ("--ros-args", "--params-file", args.calibration) if name in ("line_sim", "grader") else ()
         nodes.append(NodeProcess(name, params, domain_id=domain_id, log_dir=out / "logs", extra_args=calibration,
                                  namespace=args.namespace))
     return nodes
+
+
+def _sim_params(args: argparse.Namespace, fillets: int | None) -> dict[str, object]:
+    """line_sim's parameters: the line, its preset and the placement options given, the crowding, the speed."""
+    params: dict[str, object] = {
+        "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
+        "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
+        "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
+        "max_lead_s": MAX_LEAD_S, "top_camera": args.top_camera, "sensor": args.sensor, "line": args.line,
+        "lane_pitch_m": args.lane_pitch_m, **{name: float(value) for name, value in args.placement.items()},
+    }
+    if args.spacing is not None:
+        params["spawn_spacing_m"] = float(args.spacing)
+    if args.fillets_per_minute is not None:
+        params["fillets_per_minute"] = float(args.fillets_per_minute)
+    if args.speed_change_fpm:
+        params.update(speed_change_fpm=float(args.speed_change_fpm), speed_change_at_s=float(args.speed_change_at))
+    return params
+
+
+def _grader_params(args: argparse.Namespace, vision_params: dict[str, object]) -> dict[str, object]:
+    """The grader's: the score it grades and, with --threshold, a constant reject cut on that score."""
+    params = dict(vision_params)
+    if args.score is not None:
+        params["score"] = args.score
+    if args.threshold is not None:
+        if (args.score or SCORE_LINE) == SCORE_LINE:
+            params["line_threshold"] = [float(args.threshold), 0.0, 0.0]
+        else:
+            params["threshold"] = float(args.threshold)
+    return params
 
 
 def _recorded(namespace: str) -> dict[str, str]:

@@ -14,16 +14,42 @@ import re
 import sys
 
 from woody_common.calibration import DEFAULT_PATH as CALIBRATION_PATH
-from woody_common.line import MAX_SIDE_RATE_HZ, MAX_SPAWN_DURATION_S, SPEED_RANGE_FPM
+from woody_common.line import (
+    LANE_PITCH_M,
+    MAX_SIDE_RATE_HZ,
+    MAX_SPAWN_DURATION_S,
+    MAX_SPAWN_SPACING_M,
+    MIN_SPAWN_SPACING_M,
+    SPEED_RANGE_FPM,
+    check_lane_pitch,
+    fpm_to_mps,
+    max_fillets_per_minute,
+)
+from woody_sim.line_conditions import LINE_PRESETS, MAX_LATERAL_M, MAX_YAW_DEG, SCALE_RANGE, LineConditions
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
+from woody_sim.meshes import MAX_YAW_SD_DEG
 from woody_sim.sensor_model import PRESETS
-from woody_tools import arguments, line_run
-from woody_tools.line_run import RunRefused
+from woody_tools import line_run
+from woody_tools.line_run import RunRefused, describe_conditions
+from woody_vision.grader_core import SCORES
+
+MAX_THRESHOLD = 1000.0
+"""Largest constant reject cut accepted (the grader's own limit on ``threshold``)."""
+PLACEMENT_OPTIONS = (  # (option, LineConditions field, lowest, highest, unit)
+    ("--yaw-sd", "yaw_sd_deg", 0.0, MAX_YAW_SD_DEG, "deg"),
+    ("--yaw-max", "yaw_max_deg", 0.0, MAX_YAW_DEG, "deg"),
+    ("--blunt-fraction", "blunt_fraction", 0.0, 1.0, ""),
+    ("--lateral-sd", "lateral_sd_m", 0.0, MAX_LATERAL_M, "m"),
+    ("--lateral-max", "lateral_max_m", 0.0, MAX_LATERAL_M, "m"),
+)
+"""The placement options of a messy line, each overriding the --line preset's value (line_sim's parameters)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lanes", type=int, default=3, help="lanes across the belt, 1-6 (default 3)")
-    parser.add_argument("--speed-fpm", type=float, default=100.0, help="line speed in feet per minute (default 100)")
+    parser.add_argument("--speed-fpm", type=float, default=100.0,
+                        help=f"line speed in feet per minute, anywhere in {SPEED_RANGE_FPM[0]:g}.."
+                             f"{SPEED_RANGE_FPM[1]:g} (default 100; commercial lines run 90-140)")
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--fillets", type=int, default=None, help="total fillets to spawn (default 12)")
     group.add_argument("--duration", type=float, default=None, help="sim seconds of spawning instead of a count")
@@ -34,12 +60,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=7, help="seed of the fillet mix (default 7)")
     parser.add_argument("--out", default=None, help="output folder (default bags/run-<time>)")
     parser.add_argument("--realtime", action="store_true", help="pace the simulation to the wall clock")
-    parser.add_argument("--threshold", type=float, default=None, help="Φ threshold of the grader (default: its own)")
     parser.add_argument("--side-rate", type=float, default=60.0, help="side camera frame rate, Hz (default 60)")
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m)")
-    arguments.add_yaw_sd(parser, "line_sim's yaw_sd_deg")
     parser.add_argument("--calibration", default=str(CALIBRATION_PATH),
                         help="calibration file given to line_sim and the grader as a ROS params file "
                              "(default config/calibration.yaml)")
@@ -52,6 +76,56 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="overwrite a run already in --out")
     parser.add_argument("--share-domain", action="store_true",
                         help="run on an exported ROS_DOMAIN_ID even when another woody run holds it (they mix)")
+    _add_line_arguments(parser)
+    _add_grading_arguments(parser)
+
+
+def _add_line_arguments(parser: argparse.ArgumentParser) -> None:
+    """How untidy the line is (woody_sim.line_conditions) and how crowded: line_sim's placement parameters."""
+    presets = "; ".join(f"{name}: {describe_conditions(c)}" for name, c in LINE_PRESETS.items())
+    line = parser.add_argument_group("line conditions", "each fillet is placed by its own draw, seeded by --seed "
+                                     "and its spawn index; an option given here wins over the --line preset")
+    line.add_argument("--line", default="tidy", metavar="PRESET",
+                      help=f"line conditions preset, {'|'.join(LINE_PRESETS)} (default tidy). {presets}")
+    line.add_argument("--yaw-sd", type=float, default=None, metavar="DEG",
+                      help=f"per-fillet turn on the belt: sd of a normal draw truncated at --yaw-max, "
+                           f"0..{MAX_YAW_SD_DEG:g} (0: straight)")
+    line.add_argument("--yaw-max", type=float, default=None, metavar="DEG",
+                      help=f"largest turn, 0..{MAX_YAW_DEG:g} (0: 2 x --yaw-sd)")
+    line.add_argument("--blunt-fraction", type=float, default=None, metavar="F",
+                      help="fraction of fillets sent blunt end first, 0..1")
+    line.add_argument("--lateral-sd", type=float, default=None, metavar="M",
+                      help=f"offset of a fillet's centre across its lane: sd of a normal draw truncated at "
+                           f"--lateral-max, 0..{MAX_LATERAL_M:g} m")
+    line.add_argument("--lateral-max", type=float, default=None, metavar="M",
+                      help=f"largest lateral offset, 0..{MAX_LATERAL_M:g} m and at most half the lane pitch "
+                           "(0: 2 x --lateral-sd)")
+    line.add_argument("--scale", default=None, metavar="MIN,MAX",
+                      help=f"size factor drawn uniform in MIN..MAX, within {SCALE_RANGE[0]:g}..{SCALE_RANGE[1]:g}; "
+                           "a fillet's mass follows its volume (x s^3)")
+    line.add_argument("--lane-pitch", type=float, default=None, metavar="M",
+                      help=f"distance between lane centres, given to line_sim and the segmenter (default "
+                           f"{LANE_PITCH_M:g} m); small enough and neighbouring fillets touch side by side")
+    line.add_argument("--spacing", type=float, default=None, metavar="M",
+                      help=f"belt distance between consecutive fillets of a lane, {MIN_SPAWN_SPACING_M:g}.."
+                           f"{MAX_SPAWN_SPACING_M:g} m (default line_sim's 0.45); a fillet's length + 0.02 leaves a "
+                           "2 cm gap")
+    line.add_argument("--fillets-per-minute", type=float, default=None, metavar="N",
+                      help=f"spawn rate per lane instead of --spacing; at most the rate that keeps fillets "
+                           f"{MIN_SPAWN_SPACING_M:g} m apart at the line speed")
+    line.add_argument("--speed-change", default=None, metavar="FPM@SECONDS",
+                      help="the belt changes to FPM at SECONDS of sim time; every fillet on it follows")
+
+
+def _add_grading_arguments(parser: argparse.ArgumentParser) -> None:
+    grading = parser.add_argument_group("grading")
+    grading.add_argument("--score", default=None, metavar="SCORE",
+                         help="what the grader grades: line (line_phi against cuts that follow the measured speed "
+                              "and leading end, three-class grade; the grader's default) or paper (the paper's Φ "
+                              "against one threshold)")
+    grading.add_argument("--threshold", type=float, default=None, metavar="X",
+                         help="a constant reject cut on the score in use (line: line_threshold [X, 0, 0]; paper: "
+                              "threshold X); default the calibrated cuts of --calibration")
 
 
 def _validate(args: argparse.Namespace) -> None:
@@ -71,12 +145,108 @@ def _validate(args: argparse.Namespace) -> None:
         raise RunRefused(f"--k values must be finite and >= 0, got {' '.join(f'{k:g}' for k in args.k)}")
     if args.namespace and not re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", args.namespace):
         raise RunRefused(f"--namespace must be a ROS name like /line2, got '{args.namespace}'")
+    _validate_line(args)
+    _validate_crowding(args)
+    _validate_grading(args)
+
+
+def _validate_line(args: argparse.Namespace) -> None:
+    """The placement options against their ranges; sets ``args.placement`` (the options given, as line_sim's
+    parameters) and ``args.conditions`` (the line they make with the preset)."""
+    if args.line not in LINE_PRESETS:
+        raise RunRefused(f"--line must be one of {'|'.join(LINE_PRESETS)}, got '{args.line}'")
+    given: dict[str, float] = {}
+    for option, field, low, high, unit in PLACEMENT_OPTIONS:
+        value = getattr(args, option[2:].replace("-", "_"))
+        if value is None:
+            continue
+        if not low <= value <= high:
+            raise RunRefused(f"{option} must be within {low:g}..{high:g}{' ' + unit if unit else ''}, got {value:g}")
+        given[field] = value
+    if args.scale is not None:
+        given["scale_min"], given["scale_max"] = _scale_range(args.scale)
+    preset = LINE_PRESETS[args.line]
+    values = {field: getattr(preset, field) for field in LineConditions.__dataclass_fields__}
+    values.update(given)
+    for field in ("yaw_max_deg", "lateral_max_m"):  # 0 means 2 sd, as in line_sim
+        values[field] = values[field] or None
+    try:
+        args.conditions = LineConditions(**values)
+    except ValueError as exc:
+        raise RunRefused(f"--line {args.line} with the options given: {exc}") from None
+    args.placement = given
+
+
+def _scale_range(text: str) -> tuple[float, float]:
+    """``--scale MIN,MAX`` within SCALE_RANGE, MIN <= MAX."""
+    low, high = SCALE_RANGE
+    try:
+        smallest, largest = (float(part) for part in text.split(","))
+    except ValueError:
+        smallest = largest = float("nan")
+    if not low <= smallest <= largest <= high:
+        raise RunRefused(f"--scale must be MIN,MAX with {low:g} <= MIN <= MAX <= {high:g}, got '{text}'")
+    return smallest, largest
+
+
+def _validate_crowding(args: argparse.Namespace) -> None:
+    """Lane pitch, in-lane spacing or spawn rate, and the speed change; sets ``args.lane_pitch_m`` and
+    ``args.speed_change_fpm``/``args.speed_change_at`` (0, 0 without a change)."""
+    pitch = LANE_PITCH_M if args.lane_pitch is None else args.lane_pitch
+    try:
+        args.lane_pitch_m = check_lane_pitch(args.lanes, pitch)
+    except ValueError as exc:
+        raise RunRefused(f"--lane-pitch: {exc}") from None
+    lateral = args.conditions.lateral_max_m
+    if lateral > pitch / 2 + 1e-12:
+        raise RunRefused(f"lateral offsets up to {lateral:g} m would move fillets out of lanes {pitch:g} m apart: "
+                         f"--lateral-max at most {pitch / 2:g} m")
+    if args.spacing is not None and args.fillets_per_minute is not None:
+        raise RunRefused("--spacing and --fillets-per-minute both set the in-lane spacing: give one")
+    if args.spacing is not None and not MIN_SPAWN_SPACING_M <= args.spacing <= MAX_SPAWN_SPACING_M:
+        raise RunRefused(f"--spacing must be within {MIN_SPAWN_SPACING_M:g}..{MAX_SPAWN_SPACING_M:g} m (below "
+                         f"{MIN_SPAWN_SPACING_M:g} m every fillet overlaps the next), got {args.spacing:g}")
+    args.speed_change_fpm, args.speed_change_at = _speed_change(args.speed_change)
+    rate = args.fillets_per_minute
+    for fpm in dict.fromkeys((args.speed_fpm, args.speed_change_fpm or args.speed_fpm)):
+        top = max_fillets_per_minute(fpm_to_mps(fpm))
+        if rate is not None and not 0.0 < rate <= top * (1 + 1e-12):
+            raise RunRefused(f"--fillets-per-minute must be in (0, {top:.1f}] at {fpm:g} FPM (fillets at least "
+                             f"{MIN_SPAWN_SPACING_M:g} m apart), got {rate:g}")
+
+
+def _speed_change(text: str | None) -> tuple[float, float]:
+    """``--speed-change FPM@SECONDS`` as (FPM, sim s); (0, 0) without one."""
+    if text is None:
+        return 0.0, 0.0
+    low, high = SPEED_RANGE_FPM
+    try:
+        fpm, at = (float(part) for part in text.split("@"))
+    except ValueError:
+        fpm = at = float("nan")
+    if not (low <= fpm <= high and 0.0 <= at <= MAX_SPAWN_DURATION_S):
+        raise RunRefused(f"--speed-change must be FPM@SECONDS with FPM in [{low:g}, {high:g}] and SECONDS in "
+                         f"[0, {MAX_SPAWN_DURATION_S:g}], got '{text}'")
+    return fpm, at
+
+
+def _validate_grading(args: argparse.Namespace) -> None:
+    if args.score is not None and args.score not in SCORES:
+        raise RunRefused(f"--score must be one of {'|'.join(SCORES)}, got '{args.score}'")
+    if args.threshold is not None and not 0.0 < args.threshold <= MAX_THRESHOLD:
+        raise RunRefused(f"--threshold must be in (0, {MAX_THRESHOLD:g}], got {args.threshold:g}")
+
+
+def checked(args: argparse.Namespace) -> argparse.Namespace:
+    """``args`` validated and resolved (the line's conditions, lane pitch, speed change) for
+    :func:`woody_tools.line_run.run_checked`; `RunRefused` names the first bad option in one line."""
+    _validate(args)
+    return args
 
 
 def run(args: argparse.Namespace) -> int:
     try:
-        _validate(args)
-        return line_run.run_checked(args)
+        return line_run.run_checked(checked(args))
     except RunRefused as exc:
         print(f"woody run: {exc}", file=sys.stderr)
         return 2
