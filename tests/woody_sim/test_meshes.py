@@ -214,7 +214,7 @@ def test_mesh_set_specs() -> None:
             load_mesh_set(bad)
 
 
-# ---------------------------------------------------------------- files as users bring them (issue 14)
+# ---------------------------------------------------------------- files as users bring them
 
 def reference_saved_as(tmp_path, suffix: str, scale: float = 1.0, nan_vertex: int | None = None):
     raw = trimesh.load(BUILTIN_DIR / "seed0001.obj", force="mesh", process=False)

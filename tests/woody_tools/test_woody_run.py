@@ -81,7 +81,7 @@ def _parent_cmdline(pid: str) -> str:
     return open(f"/proc/{ppid}/cmdline", "rb").read().replace(b"\0", b" ").decode(errors="replace")
 
 
-# ---------------------------------------------------------------- bad input (issue 14): one line, exit 2, nothing lost
+# ---------------------------------------------------------------- bad input: one line, exit 2, nothing lost
 
 def woody_run(*args: str, env: dict | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
     return subprocess.run([entry_point("woody"), "run", *args], capture_output=True, text=True, timeout=timeout,

@@ -43,7 +43,7 @@ TOP_EDGE_OFFSET_M = 0.20
 SIDE_AXLE_PX = (480.0, 348.0)
 """(u, v) of the roller axle in the 960 x 696 side image (the image is centred on the axle)."""
 SIDE_ROLLER_RADIUS_PX = 48.0
-"""The 20.7 mm end roller at the side camera's 0.431 mm/px (seed-system.md, Cameras)."""
+"""The 20.7 mm end roller at the side camera's 0.431 mm/px (the paper's system)."""
 
 
 def fpm_to_mps(speed_fpm: float) -> float:

@@ -206,7 +206,7 @@ class Throughput:
         if self.efficiency is not None:
             text += (f"; {self.workers} workers: {self.parallel_per_min_per_worker:.1f} /min/worker against "
                      f"{self.one_worker_per_min:.1f} /min with one warm worker alone ({self.probe_evaluations} "
-                     f"evaluations of one mesh, same session): scaling efficiency {self.efficiency * 100:.0f} %")
+                     f"evaluations of one mesh, same sweep): scaling efficiency {self.efficiency * 100:.0f} %")
         return text
 
     def as_meta(self) -> dict:

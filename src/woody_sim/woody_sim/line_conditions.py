@@ -89,7 +89,7 @@ class FilletPlacement:
 
 LINE_PRESETS: dict[str, LineConditions] = {
     "tidy": LineConditions(),
-    # The mixed line of issue 22: yaw sd 15 deg (bound 35: never across the belt), half blunt end first, the centre
+    # The mixed line: yaw sd 15 deg (bound 35: never across the belt), half blunt end first, the centre
     # within 2.5 cm of the lane centre (sd 1 cm), and sizes x0.85-1.15 (mass x0.61-1.52).
     "messy": LineConditions(yaw_sd_deg=15.0, yaw_max_deg=35.0, blunt_fraction=0.5, lateral_sd_m=0.01,
                             lateral_max_m=0.025, scale_min=0.85, scale_max=1.15),

@@ -28,7 +28,7 @@ from woody_common.line import BELT_MARGIN_M, LANE_PITCH_M, LANES, TOP_CAMERA_HEI
 
 TOP_CAMERA_PRESETS: dict[str, dict[str, float | int]] = {
     "default": {},
-    # The seed system's top camera (reference/seed-system.md "Cameras"): 960 x 696 px, 86.6 deg field of view over
+    # The seed system's top camera (the paper's own system): 960 x 696 px, 86.6 deg field of view over
     # its 696-px axis, ~0.33 m above the belt, nadir. Its flow runs along the 960 px; here flow runs down the image
     # rows, so the image is 696 wide (across the belt, the 86.6 deg axis) and 960 tall. The optical axis stays
     # top_center_x, 0.20 m upstream of the roller edge (the seed's position along the flow is not known).
@@ -84,7 +84,7 @@ class LineGeometry:
     lanes: int = LANES
     lane_pitch: float = LANE_PITCH_M
     roller_radius: float = 0.0207
-    """The seed system's end roller: 48 px at its side camera's 0.431 mm/px (seed-system.md, Cameras)."""
+    """The seed system's end roller: 48 px at its side camera's 0.431 mm/px."""
     belt_length: float = 1.4
     belt_margin: float = BELT_MARGIN_M
     """Extra belt width beyond the outer lanes, each side."""

@@ -77,7 +77,7 @@ __all__ = [
 
 FRAMES_IN_FLIGHT = 3
 """Frames a :class:`RenderProcess` renders ahead of collection (one shared buffer set each). Three, not two: with
-two, line_sim waited ~4 % of its wall time for a frame while both were in flight (session 6)."""
+two, line_sim waited ~4 % of its wall time for a frame while both were in flight."""
 
 # --------------------------------------------------------------------------- colours
 # Base (unlit) colours. Lambert shading multiplies them by AMBIENT + DIFFUSE * cos.

@@ -2,7 +2,7 @@
 
 Per frame: the fillet's silhouette by background subtraction, its centroid
 C_t from image moments and MDM_t = |C_t − roller axle| (px). Per fillet
-passage, as the paper's own evaluator does it (seed-system.md): NMDM =
+passage, as the paper's own evaluator does it: NMDM =
 min_t MDM_t / (R + h), with R the roller radius and h the vertical distance
 from the centroid to the silhouette's topmost row, measured once, in the first
 frame whose leading edge reaches the axle column + R; BE = (P² / L) Σ κ² of a
