@@ -95,3 +95,23 @@ def test_the_report_and_csv_carry_the_line_fields_grades_and_diversions(tmp_path
     assert "v (m/s)" in table[0] and "lead" in table[0] and table[4].endswith(
         "merged with a neighbour at the measuring point")
     assert "severe" in table[3] and "blunt" in table[2]
+
+
+def test_a_crowded_lane_matches_each_verdict_to_its_own_fillet():
+    """Fillets 0.43 s apart (closer than the match tolerance): a fillet without a verdict does not take its
+    follower's, and a track's fragment that gave up early does not push the others along."""
+    spawns = [Spawn(sim_id=i, lane=0, mesh="m", k=k, mass=20.0, line_speed=0.508, stamp=i * 0.4333,
+                    spawn_x=-1.016) for i, k in enumerate((0.0, 100.0, 0.0))]
+
+    def verdict(fillet_id, stamp, classification, phi):
+        return Verdict(fillet_id=fillet_id, lane=0, stamp=stamp, classification=classification, grade="", phi=phi,
+                       hu_term=0.1, solidity_term=0.01, nmdm=math.nan, mdm=math.nan, be=math.nan)
+
+    rows = join(spawns, [verdict(7, 2.2, "unscored", math.nan), verdict(8, 2.4333, "woody", 3.0),
+                         verdict(9, 2.8667, "normal", 14.0)])
+    assert [(r["sim_id"], r["fillet_id"]) for r in rows] == [(0, 7), (1, 8), (2, 9)]
+    rows = join(spawns, [verdict(8, 2.4333, "woody", 3.0), verdict(9, 2.8667, "normal", 14.0),
+                         verdict(10, 3.2, "unscored", math.nan)])
+    assert [(r["sim_id"], r["fillet_id"], r["verdict"]) for r in rows][:3] == [
+        (0, "", "missing"), (1, 8, "woody"), (2, 9, "normal")]
+    assert rows[3]["fillet_id"] == 10 and rows[3]["reason"] == "no spawned fillet matches"

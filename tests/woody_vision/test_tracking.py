@@ -196,3 +196,18 @@ def test_tracker_validates_its_options():
         CentroidTracker(max_distance_px=0.0)
     with pytest.raises(ValueError):
         CentroidTracker(max_unseen=0)
+
+
+def test_a_fillet_whose_blob_merged_for_a_while_takes_it_back_from_a_fresher_ghost():
+    """Crowded lanes: a fillet's blob merges with its neighbour's for five frames (its track goes unseen), while
+    the tail of the fillet ahead hangs at the edge and vanishes a frame before the merge ends. The blob coming
+    back is the long-unseen track's (its prediction hits it), not the fresher ghost's 24 px away."""
+    tracker = CentroidTracker(max_distance_px=40.0, max_unseen=15)
+    for i in range(3):
+        update = tracker.update([square_blob(320, 270), square_blob(340, 200 + 8 * i)], i / FPS)
+    ahead, fillet = (t.track_id for t in sorted(update.active, key=lambda t: -t.blob.centroid[1]))
+    for i in range(3, 7):  # the fillet's blob is part of a neighbour's (not among this lane's blobs)
+        tracker.update([square_blob(320, 270)] if i < 6 else [], i / FPS)
+    update = tracker.update([square_blob(340, 200 + 8 * 7)], 7 / FPS)
+    assert [t.track_id for t in update.active if t.unseen == 0] == [fillet]
+    assert ahead in [t.track_id for t in update.active]

@@ -85,23 +85,38 @@ def truth_of(k: float, woody_k: float) -> str:
 
 
 def join(spawns: Sequence[Spawn], verdicts: Sequence[Verdict], woody_k: float = 50.0) -> list[dict]:
-    """One row per spawned fillet (and per verdict nobody spawned), matched by lane and edge-crossing time."""
-    rows: list[dict] = []
-    used: set[int] = set()
-    for spawn in sorted(spawns, key=lambda s: (s.expected_crossing, s.lane)):
-        best, best_dt = None, MATCH_TOLERANCE_S
-        for i, verdict in enumerate(verdicts):
-            if i in used or verdict.lane != spawn.lane:
-                continue
-            dt = abs(verdict.stamp - spawn.expected_crossing)
-            if dt <= best_dt:
-                best, best_dt = i, dt
-        verdict = None if best is None else verdicts[best]
-        if best is not None:
-            used.add(best)
-        rows.append(_row(spawn, verdict, woody_k))
-    rows += [_row(None, v, woody_k) for i, v in enumerate(verdicts) if i not in used]
-    return rows
+    """One row per spawned fillet (and per verdict nobody spawned), matched by lane and edge-crossing time.
+
+    Per lane, the pairs minimise the total time difference (an assignment, not first come first served): on a
+    crowded lane fillets cross the edge less than MATCH_TOLERANCE_S apart, and a fillet without a verdict must
+    not take its neighbour's. Scored verdicts are matched first, the unscored ones to the fillets left."""
+    pairs: dict[int, int] = {}
+    for lane in sorted({s.lane for s in spawns}):
+        for scored in (True, False):  # a scored verdict is stamped at the crossing; an unscored one when it gave up
+            lane_spawns = [i for i, s in enumerate(spawns) if s.lane == lane and i not in pairs]
+            lane_verdicts = [j for j, v in enumerate(verdicts) if v.lane == lane
+                             and (v.classification in ("normal", "woody")) == scored]
+            pairs.update(_match(spawns, lane_spawns, verdicts, lane_verdicts))
+    used = set(pairs.values())
+    order = sorted(range(len(spawns)), key=lambda i: (spawns[i].expected_crossing, spawns[i].lane))
+    rows = [_row(spawns[i], verdicts[pairs[i]] if i in pairs else None, woody_k) for i in order]
+    return rows + [_row(None, v, woody_k) for j, v in enumerate(verdicts) if j not in used]
+
+
+def _match(spawns: Sequence[Spawn], spawn_ids: list[int], verdicts: Sequence[Verdict],
+           verdict_ids: list[int]) -> dict[int, int]:
+    """Spawn index -> verdict index of one lane: the assignment of least total |verdict stamp - crossing|
+    among pairs within MATCH_TOLERANCE_S."""
+    if not spawn_ids or not verdict_ids:
+        return {}
+    import numpy as np
+    from scipy.optimize import linear_sum_assignment
+
+    dt = np.abs(np.array([[verdicts[j].stamp - spawns[i].expected_crossing for j in verdict_ids]
+                          for i in spawn_ids]))
+    cost = np.where(dt <= MATCH_TOLERANCE_S, dt, 1e6)
+    rows, cols = linear_sum_assignment(cost)
+    return {spawn_ids[r]: verdict_ids[c] for r, c in zip(rows, cols) if dt[r, c] <= MATCH_TOLERANCE_S}
 
 
 def _row(spawn: Spawn | None, verdict: Verdict | None, woody_k: float) -> dict:

@@ -24,6 +24,7 @@ from woody_common.line import fpm_to_mps, spacing_at_rate
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.messages import spawn_from_msg, verdict_from_msg
 from woody_experiments.run_report import (
+    MATCH_TOLERANCE_S,
     UNSCORED_DIVERTED,
     Spawn,
     Verdict,
@@ -419,7 +420,7 @@ def _finished(monitor: LineMonitor, fillets: int | None, args: argparse.Namespac
         return False
     if not monitor.spawns:
         return False
-    if len(monitor.verdicts) >= len(monitor.spawns):
-        return True
     last = max(s.expected_crossing for s in monitor.spawns)
+    if len(monitor.verdicts) >= len(monitor.spawns) and monitor.sim_time > last + MATCH_TOLERANCE_S:
+        return True  # not before the last fillet's verdict is due: a track split in two publishes two verdicts
     return monitor.sim_time > last + 4.0

@@ -3,8 +3,9 @@
 Blobs are matched to tracks with a minimum-total-distance assignment
 (``scipy.optimize.linear_sum_assignment``) between each track's predicted
 centroid and the blob centroids, gated by ``max_distance_px``; within the gate
-a track seen more recently is preferred over a staler one (each frame unseen
-costs 2 × the gate in the assignment), like a matching cascade. The prediction
+a track seen in the previous frame is preferred over a stale one (being unseen
+costs 2 × the gate in the assignment), and among stale ones the nearer
+prediction wins, however many frames each went unseen. The prediction
 is the last centroid plus the last observed motion times the time since that
 sighting, taken from the frames' stamps: a frame the camera or the network
 dropped never reaches the tracker, so counting updates would predict one
@@ -125,10 +126,12 @@ class CentroidTracker:
         predicted = np.array([t.blob.centroid for t in tracks]) + velocity * elapsed[:, None]
         centroids = np.array([b.centroid for b in blobs], dtype=float)
         distance = np.linalg.norm(predicted[:, None, :] - centroids[None, :, :], axis=2)
-        # Recently seen tracks come first: a stale track's extrapolated ghost (e.g. of a fillet that fell off
-        # the edge moving backwards in the image) must not take the blob of the live track right behind it.
-        unseen = np.array([self._tracks[i].unseen for i in ids], dtype=float)
-        stale_penalty = 2.0 * self.max_distance_px * unseen[:, None]
+        # Live tracks come first: a stale track's extrapolated ghost (e.g. of a fillet that fell off the edge
+        # moving backwards in the image) must not take the blob of the live track right behind it. Among stale
+        # tracks the nearer prediction wins, however long each went unseen: a fillet whose blob merged with its
+        # neighbour's for a few frames takes its blob back from the ghost of the fillet that left ahead of it.
+        stale = np.array([self._tracks[i].unseen > 0 for i in ids], dtype=float)
+        stale_penalty = 2.0 * self.max_distance_px * stale[:, None]
         gate = (self.max_distance_px + GAP_GATE_GROWTH * np.linalg.norm(velocity, axis=1) * elapsed)[:, None]
         gated = np.where(distance <= gate, distance + stale_penalty, 1e9)
         rows, cols = linear_sum_assignment(gated)
