@@ -42,7 +42,7 @@ def test_a_cut_follows_the_measured_speed_and_leading_end():
     assert cut.at(FilletConditions(REFERENCE_SPEED_MPS + 0.2)) == pytest.approx(8.0 * math.exp(-0.3))
     assert cut.at(FilletConditions(blunt_first=True)) == pytest.approx(8.0 * math.exp(-0.2))
     assert cut.at(FilletConditions(math.nan)) == pytest.approx(8.0)  # speed unknown: the base
-    assert Cut.of(5.0) == Cut(5.0) and Cut.of([5.0, 1.0, 0.5]).as_list() == [5.0, 1.0, 0.5]
+    assert Cut.of(5.0) == Cut(5.0) and Cut.of([5.0, 1.0, 0.5, 0.1, 2.0]).as_list() == [5.0, 1.0, 0.5, 0.1, 2.0]
     rules = GradingRules(cut)
     fast = FilletConditions(REFERENCE_SPEED_MPS + 0.2)
     assert rules.is_woody(7.0) and not rules.is_woody(7.0, fast)  # the cut falls with speed: 7 is normal there
@@ -58,3 +58,10 @@ def test_malformed_cuts_are_refused(value):
 def test_the_grade_cuts_must_stay_ordered_for_either_leading_end():
     with pytest.raises(ValueError, match="severe_threshold"):
         GradingRules(Cut(8.0), Cut(10.0), Cut(6.0, blunt_offset=1.0))  # blunt first: severe 16 > moderate 10
+
+
+def test_a_cut_allows_for_a_turned_or_longer_fillet():
+    cut = Cut(8.0, turn_slope=-0.01, length_slope=2.0)
+    assert cut.at(FilletConditions(turn_deg=20.0)) == pytest.approx(8.0 * math.exp(-0.2))
+    assert cut.at(FilletConditions(length_m=0.24)) == pytest.approx(8.0 * math.exp(0.1))
+    assert cut.at(FilletConditions(turn_deg=math.nan, length_m=math.nan)) == pytest.approx(8.0)

@@ -34,6 +34,7 @@ from woody_vision.shape_score import (
     make_reference,
     shape_terms,
     solidity,
+    turn_deg,
 )
 from woody_vision.synthetic import DEFAULT_TOP_K, TopFillet, TopScene, teardrop_polygon
 
@@ -400,3 +401,13 @@ def test_the_reference_skips_a_flat_frame_merged_with_a_neighbour():
     _, result, _ = run_evaluator(crowded)
     assert result.reference_stamp == pytest.approx((reference_index - 1) / FPS)
     assert result.status == STATUS_SCORED and result.phi == pytest.approx(plain.phi, abs=0.5)
+
+
+def test_the_turn_from_the_flow_is_read_off_the_outline():
+    straight = translating(1)[0].astype(float)
+    centre = straight.mean(axis=0)
+    for degrees in (0.0, 15.0, -30.0):
+        angle = math.radians(degrees)
+        rotation = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+        turned = polygon_contour((straight - centre) @ rotation.T + centre)
+        assert turn_deg(turned) == pytest.approx(abs(degrees), abs=1.5)

@@ -28,6 +28,8 @@ _SECTIONS = {"line_sim": {"total_mass_kg": "mass", "hinge_damping": "damping", "
 """Per node: dataclass field -> the node's parameter name."""
 _PROVENANCE = "woody_calibration"
 CUT_FIELDS = ("line_threshold", "moderate_threshold", "severe_threshold")
+CUT_LENGTH = 5
+"""Numbers per cut (woody_vision.grading.CUT_TERMS; woody_common cannot import woody_vision)."""
 """Fields that are cuts (three numbers each) rather than single values."""
 
 
@@ -45,11 +47,12 @@ class Calibration:
     """Coulomb cap once it slips."""
     phi_threshold: float
     """The paper's rule: Φ strictly below this is woody."""
-    line_threshold: tuple[float, float, float]
-    """The line's reject cut on ``line_phi``: [base, speed_slope, blunt_offset] (woody_vision.grading.Cut)."""
-    moderate_threshold: tuple[float, float, float]
+    line_threshold: tuple[float, ...]
+    """The line's reject cut on ``line_phi``: [base, speed_slope, blunt_offset, turn_slope, length_slope]
+    (woody_vision.grading.Cut)."""
+    moderate_threshold: tuple[float, ...]
     """The grade's normal/moderate cut on ``line_phi``, same form."""
-    severe_threshold: tuple[float, float, float]
+    severe_threshold: tuple[float, ...]
     """The grade's moderate/severe cut on ``line_phi``, same form."""
     provenance: dict = field(default_factory=dict, compare=False)
     """command, date, mesh sets, targets and achieved figures (free-form, flat str/float values)."""
@@ -61,9 +64,10 @@ class Calibration:
                 raise ValueError(f"calibration: {name} must be a finite number >= 0, got {value!r}")
         for name in CUT_FIELDS:
             value = getattr(self, name)
-            if (not isinstance(value, (list, tuple)) or len(value) != 3
+            if (not isinstance(value, (list, tuple)) or len(value) != CUT_LENGTH
                     or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in value) or value[0] <= 0):
-                raise ValueError(f"calibration: {name} must be [base > 0, speed_slope, blunt_offset], got {value!r}")
+                raise ValueError(f"calibration: {name} must be {CUT_LENGTH} finite numbers, the first > 0 "
+                                 f"(woody_vision.grading.CUT_TERMS), got {value!r}")
             object.__setattr__(self, name, tuple(float(v) for v in value))
         if self.total_mass_kg <= 0.0:
             raise ValueError(f"calibration: total_mass_kg must be > 0, got {self.total_mass_kg}")

@@ -57,8 +57,8 @@ from woody_vision.side_view import SidePassageTracker
 from woody_vision.tracking import CentroidTracker
 
 RUN_COLUMNS = ["mesh", "k", "speed_fpm", "condition", "lane", "mass", "yaw_deg", "blunt_first", "scale", "phi",
-               "hu_term", "solidity_term", "line_phi", "speed_mps", "leading_end", "rejected", "nmdm", "mdm", "be",
-               "status", "reason"]
+               "hu_term", "solidity_term", "line_phi", "speed_mps", "leading_end", "turn_deg", "length_m", "rejected",
+               "nmdm", "mdm", "be", "status", "reason"]
 """One row per lane: the run (mesh, k, speed, condition and how the fillet lay), the paper's Φ (NaN unless its
 window closed cleanly), the line score with what the grader measured, the side view, and the verdict's status."""
 
@@ -312,7 +312,8 @@ def _lane_rows(spec: RunSpec, placement: FilletPlacement, mass: float, watched: 
         row = {"mesh": spec.mesh, "k": spec.k, "speed_fpm": spec.speed_fpm, "condition": spec.condition,
                "lane": lane, "mass": mass, "yaw_deg": placement.yaw_deg, "blunt_first": int(placement.blunt_first),
                "scale": placement.scale, "phi": math.nan, "hu_term": math.nan, "solidity_term": math.nan,
-               "line_phi": math.nan, "speed_mps": math.nan, "leading_end": "", "rejected": 0, "nmdm": math.nan,
+               "line_phi": math.nan, "speed_mps": math.nan, "leading_end": "", "turn_deg": math.nan,
+               "length_m": math.nan, "rejected": 0, "nmdm": math.nan,
                "mdm": math.nan, "be": math.nan, "status": "unscored" if spec.top else "", "reason": ""}
         if spec.top:
             row.update(results.get(lane, {"reason": "no verdict before the run ended"}))
@@ -341,6 +342,7 @@ def _shape_row(graded) -> dict:
     return {"phi": float(shape.phi) if paper else math.nan, "hu_term": float(shape.hu_term) if paper else math.nan,
             "solidity_term": float(shape.solidity_term) if paper else math.nan, "line_phi": float(shape.line_phi),
             "speed_mps": graded.conditions.speed_mps, "leading_end": shape.leading_end,
+            "turn_deg": graded.conditions.turn_deg, "length_m": graded.conditions.length_m,
             "rejected": shape.rejected_frames, "status": shape.status, "reason": shape.reason, "trace": trace}
 
 

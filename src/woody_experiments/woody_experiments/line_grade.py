@@ -7,12 +7,14 @@ k = 10 and 20 fillets score between the normal and the k >= 40 ones, while k
 severe k = 100 fillets, the paper's two classes.
 
 Each cut is fitted between an upper (more compliant) and a lower class: per
-class a least-squares line of ln(score) on the measured speed (m/s, relative
-to 100 FPM) and the blunt-first indicator, and the cut runs between the two
+class a least-squares fit of ln(score) on the measured conditions
+(woody_vision.grading.covariates: speed, blunt end first, turn, body
+length), and the cut runs between the two
 lines, nearer the class with the smaller residual spread (each class's
 residual sd weighs the other's line), so both classes keep the same margin
 in units of their own spread. A row enters with what the grader measures
-(``speed_mps``, ``leading_end``), never with the simulator's settings.
+(``speed_mps``, ``leading_end``, ``turn_deg``, ``length_m``), never with the
+simulator's settings.
 """
 
 from __future__ import annotations
@@ -23,9 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from woody_common.line import REFERENCE_SPEED_MPS
 from woody_experiments.statistics import roc
-from woody_vision.grading import Cut, FilletConditions, GradingRules
+from woody_vision.grading import Cut, FilletConditions, GradingRules, covariates
 from woody_vision.shape_score import LEADING_BLUNT
 
 NORMAL_K = 0.0
@@ -46,12 +47,12 @@ def true_grade(k: float) -> str:
 
 def conditions_of(row: dict) -> FilletConditions:
     """What the grader measured of a row's fillet."""
-    return FilletConditions(float(row["speed_mps"]), row.get("leading_end") == LEADING_BLUNT)
+    return FilletConditions(float(row["speed_mps"]), row.get("leading_end") == LEADING_BLUNT,
+                            float(row.get("turn_deg", math.nan)), float(row.get("length_m", math.nan)))
 
 
 def _design(rows: Sequence[dict]) -> np.ndarray:
-    return np.array([[1.0, float(r["speed_mps"]) - REFERENCE_SPEED_MPS, float(conditions_of(r).blunt_first)]
-                     for r in rows])
+    return np.array([[1.0, *covariates(conditions_of(r))] for r in rows])
 
 
 def _class_line(rows: Sequence[dict]) -> tuple[np.ndarray, float]:
@@ -68,7 +69,7 @@ def fit_cut(upper: Sequence[dict], lower: Sequence[dict]) -> Cut:
         raise ValueError(f"a cut needs at least 4 scored rows per class, got {len(upper)} and {len(lower)}")
     (up, up_sd), (low, low_sd) = _class_line(upper), _class_line(lower)
     coef = (up * low_sd + low * up_sd) / (up_sd + low_sd)
-    return Cut(math.exp(coef[0]), float(coef[1]), float(coef[2]))
+    return Cut(math.exp(coef[0]), *(float(c) for c in coef[1:]))
 
 
 def scored(rows: Sequence[dict]) -> list[dict]:
@@ -111,8 +112,11 @@ def graded_runs(rows: Sequence[dict], rules: GradingRules) -> list[GradedRun]:
     out = []
     for (mesh, k, speed, condition), lanes in sorted(groups.items(), key=lambda kv: str(kv[0])):
         score = float(np.median([r["line_phi"] for r in lanes]))
-        measured = FilletConditions(float(np.median([r["speed_mps"] for r in lanes])),
-                                    sum(conditions_of(r).blunt_first for r in lanes) * 2 > len(lanes))
+        each = [conditions_of(r) for r in lanes]
+        measured = FilletConditions(float(np.median([c.speed_mps for c in each])),
+                                    sum(c.blunt_first for c in each) * 2 > len(each),
+                                    float(np.median([c.turn_deg for c in each])),
+                                    float(np.median([c.length_m for c in each])))
         decision = rules.classify(score, measured)
         out.append(GradedRun(mesh, k, speed, condition, score, math.log(score / decision.threshold),
                              decision.label, decision.grade or ""))

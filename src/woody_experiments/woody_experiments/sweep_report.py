@@ -48,7 +48,7 @@ NORMAL_K, SEVERE_K = 0.0, 100.0
 PLOTS = ("phi_vs_k.png", "nmdm_vs_k.png", "phi_per_lane.png", "roc.png")
 
 _FLOAT_COLUMNS = ("k", "speed_fpm", "mass", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be", "line_phi",
-                  "speed_mps", "yaw_deg", "scale", "blunt_first", "rejected")
+                  "speed_mps", "turn_deg", "length_m", "yaw_deg", "scale", "blunt_first", "rejected")
 
 
 def load_rows(path: Path) -> list[dict]:

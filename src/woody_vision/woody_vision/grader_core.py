@@ -185,7 +185,8 @@ class FilletGrader:
         paper = self.score == SCORE_PAPER
         score = result.phi if paper else result.line_phi
         usable = result.window_closed if paper else result.status == STATUS_SCORED
-        conditions = FilletConditions(result.speed_px_s / self.pixels_per_metre, result.leading_end == LEADING_BLUNT)
+        conditions = FilletConditions(result.speed_px_s / self.pixels_per_metre, result.leading_end == LEADING_BLUNT,
+                                      result.turn_deg, result.length_px / self.pixels_per_metre)
         if not (usable and math.isfinite(score)):
             return GradedFillet(track_id, lane, result, "unscored", "", conditions=conditions)
         decision = self.rules.classify(score, conditions)

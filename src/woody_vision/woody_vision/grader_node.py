@@ -77,8 +77,9 @@ class Grader(Node):
         paper = declare(self, "threshold", calibration.phi_threshold, "With score paper: Φ below this is woody "
                         "(stiff fillets deform less); the default is the calibrated one.", 0.001, 1000.0)
         cuts = [Cut.of(declare(self, name, list(getattr(calibration, name)), text)) for name, text in (
-            ("line_threshold", "With score line: the reject cut on line_phi, [base at 100 FPM narrow end first, "
-             "d ln(cut)/d speed per m/s, ln offset blunt end first]; the default is the calibrated one."),
+            ("line_threshold", "With score line: the reject cut on line_phi, [base at 100 FPM, narrow end first, "
+             "straight, 0.19 m long; d ln(cut)/d speed per m/s; ln offset blunt end first; d ln(cut)/d turn per "
+             "degree; d ln(cut)/d length per m]; the default is the calibrated one."),
             ("moderate_threshold", "With score line: line_phi below this cut grades at least moderate (same form)."),
             ("severe_threshold", "With score line: line_phi below this cut grades severe (same form)."))]
         self.rules = GradingRules(paper) if self.score == SCORE_PAPER else GradingRules(*cuts)
@@ -208,6 +209,7 @@ class Grader(Node):
             grade=fillet.grade, unscored_reason=shape.reason, score=_finite_or_nan(fillet.score),
             line_phi=_finite_or_nan(shape.line_phi), line_fraction=shape.line_fraction,
             speed=_finite_or_nan(conditions.speed_mps), leading_end=shape.leading_end,
+            turn=_finite_or_nan(conditions.turn_deg), length=_finite_or_nan(conditions.length_m),
             rejected_frames=shape.rejected_frames, phi=_finite_or_nan(shape.phi),
             hu_term=_finite_or_nan(shape.hu_term), solidity_term=_finite_or_nan(shape.solidity_term),
             threshold=self.rules.threshold.at(conditions), frames_in_window=shape.frames,

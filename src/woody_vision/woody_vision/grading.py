@@ -6,12 +6,15 @@ scores a LOW shape score; a normal, flexible fillet drapes and scores high
 woody when its score is strictly below the cut.
 
 A cut (:class:`Cut`) may depend on what the top camera measures of each
-fillet: ln(cut) = ln(base) + speed_slope · (v − v_ref) + blunt_offset · b,
-with v the fillet's measured speed (m/s), v_ref 100 FPM and b = 1 when it
-travels blunt end first. A fillet drapes less at a higher speed (it leaves
-the roller in a flatter arc) and a blunt leading end bends less than a
-tapered one, for normal and woody meat alike, so one constant cut cannot fit
-a line whose speed and fillet direction vary. `woody calibrate` fits three
+fillet: ln(cut) = ln(base) + speed_slope · (v − v_ref) + blunt_offset · b
++ turn_slope · θ + length_slope · (L − L_ref), with v the fillet's measured
+speed (m/s), v_ref 100 FPM, b = 1 when it travels blunt end first, θ how far
+(degrees) its long axis lies turned from the flow, and L its body length (m),
+L_ref 0.19 m. A fillet drapes less at a higher speed (it leaves the roller in
+a flatter arc), a blunt leading end bends less than a tapered one, and a
+turned fillet crosses the edge corner first, for normal and woody meat
+alike, so one constant cut cannot fit a line whose speed and fillets vary.
+Unknown measurements (NaN) count as the reference values. `woody calibrate` fits three
 cuts: the reject cut (normal vs severe) and the grade's normal/moderate and
 moderate/severe cuts. A constant cut (both slopes 0) is the paper's single
 threshold.
@@ -27,6 +30,8 @@ import math
 import numbers
 from dataclasses import dataclass
 
+import numpy as np
+
 from woody_common.line import REFERENCE_SPEED_MPS
 
 LABEL_NORMAL = "normal"
@@ -36,12 +41,18 @@ GRADE_MODERATE = "moderate"
 GRADE_SEVERE = "severe"
 
 
+REFERENCE_LENGTH_M = 0.19
+"""Body length at which a cut takes its base (a typical fillet)."""
+
+
 @dataclass(frozen=True)
 class FilletConditions:
     """What the decision may depend on, as measured for one fillet."""
 
     speed_mps: float = REFERENCE_SPEED_MPS
     blunt_first: bool = False
+    turn_deg: float = 0.0
+    length_m: float = REFERENCE_LENGTH_M
 
 
 TIDY = FilletConditions()
@@ -50,7 +61,7 @@ TIDY = FilletConditions()
 
 @dataclass(frozen=True)
 class Cut:
-    """A cut on the shape score: ln(cut) = ln(base) + speed_slope·(v − v_ref) + blunt_offset·[blunt first]."""
+    """A cut on the shape score, following the measured conditions (module doc)."""
 
     base: float
     """The cut at 100 FPM, narrow end first."""
@@ -58,33 +69,48 @@ class Cut:
     """d ln(cut) / dv, per m/s."""
     blunt_offset: float = 0.0
     """Added to ln(cut) for a fillet travelling blunt end first."""
+    turn_slope: float = 0.0
+    """d ln(cut) / dθ, per degree turned from the flow."""
+    length_slope: float = 0.0
+    """d ln(cut) / dL, per metre of body length."""
 
     def __post_init__(self) -> None:
         _require_positive_finite("cut base", self.base)
-        for name in ("speed_slope", "blunt_offset"):
+        for name in ("speed_slope", "blunt_offset", "turn_slope", "length_slope"):
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"cut {name} must be finite, got {getattr(self, name)}")
 
     @classmethod
     def of(cls, value: Cut | float | list | tuple) -> Cut:
-        """A cut from a number (constant), a [base, speed_slope, blunt_offset] list or a cut."""
+        """A cut from a number (constant), a list in :data:`CUT_TERMS` order or a cut."""
         if isinstance(value, Cut):
             return value
         if isinstance(value, (list, tuple)):
-            if len(value) != 3:
-                raise ValueError(f"a cut is [base, speed_slope, blunt_offset], got {list(value)}")
+            if len(value) != len(CUT_TERMS):
+                raise ValueError(f"a cut is [{', '.join(CUT_TERMS)}], got {list(value)}")
             return cls(*(float(v) for v in value))
         _require_positive_finite("threshold", value)
         return cls(float(value))
 
     def as_list(self) -> list[float]:
-        return [self.base, self.speed_slope, self.blunt_offset]
+        return [getattr(self, name) for name in CUT_TERMS]
 
     def at(self, conditions: FilletConditions = TIDY) -> float:
         """The cut's value for a fillet measured under ``conditions``."""
-        speed = conditions.speed_mps if math.isfinite(conditions.speed_mps) else REFERENCE_SPEED_MPS
-        return self.base * math.exp(self.speed_slope * (speed - REFERENCE_SPEED_MPS)
-                                    + self.blunt_offset * bool(conditions.blunt_first))
+        return self.base * math.exp(float(np.dot(self.as_list()[1:], covariates(conditions))))
+
+
+CUT_TERMS = ("base", "speed_slope", "blunt_offset", "turn_slope", "length_slope")
+"""A cut as a list (a ROS parameter, a calibration entry): these fields in this order."""
+
+
+def covariates(conditions: FilletConditions) -> list[float]:
+    """(v − v_ref, blunt, θ, L − L_ref) of measured conditions; a NaN measurement counts as the reference."""
+    def known(value: float, reference: float) -> float:
+        return value if math.isfinite(value) else reference
+
+    return [known(conditions.speed_mps, REFERENCE_SPEED_MPS) - REFERENCE_SPEED_MPS, float(bool(conditions.blunt_first)),
+            known(conditions.turn_deg, 0.0), known(conditions.length_m, REFERENCE_LENGTH_M) - REFERENCE_LENGTH_M]
 
 
 @dataclass(frozen=True)

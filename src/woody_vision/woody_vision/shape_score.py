@@ -45,8 +45,9 @@ found between the two frames around it. The evaluator keeps scoring past the
 centroid crossing until that moment is passed (a fillet sent blunt end first
 has its centroid ahead of mid-body, so its window closes earlier). It also
 reports what the decision may depend on, all measured on the reference
-outline and the approach: the fillet's speed in the image and which end
-leads (:func:`leading_end`).
+outline and the approach: the fillet's speed in the image, which end leads
+(:func:`leading_end`), how far it lies turned from the flow
+(:func:`turn_deg`) and its body length.
 
 Crowded lanes. A window frame whose outline suddenly grows (area or width
 beyond ``MERGE_GROWTH`` × the reference's) or whose trailing edge jumps back
@@ -246,6 +247,10 @@ class ShapeResult:
     """'narrow' or 'blunt': which end of the reference outline leads (:func:`leading_end`)."""
     speed_px_s: float = math.nan
     """The fillet's speed along the image rows while flat (px/s)."""
+    turn_deg: float = math.nan
+    """How far the reference outline's long axis lies turned from the flow (0..90 degrees, :func:`turn_deg`)."""
+    length_px: float = math.nan
+    """The reference body's length along the flow (px)."""
     rejected_frames: int = 0
     """Window frames rejected as merged with a neighbour."""
     reference_contour: np.ndarray | None = None
@@ -282,6 +287,19 @@ def interpolate_at(frames: list[FrameScore], fraction: float) -> tuple[float, in
             nearer = i if weight >= 0.5 else i - 1
             return before.phi + weight * (after.phi - before.phi), nearer
     return math.nan, None
+
+
+def turn_deg(contour: np.ndarray) -> float:
+    """Angle (0..90 degrees) between the outline's principal (long) axis and the flow (image rows).
+
+    A fillet lying turned on the belt crosses the roller edge one corner
+    first and drapes less at the same overhang; the decision can allow for it.
+    """
+    m = cv2.moments(np.asarray(contour, dtype=np.int32).reshape(-1, 1, 2))
+    if m["m00"] <= 0.0:
+        return math.nan
+    axis_from_columns = 0.5 * math.degrees(math.atan2(2.0 * m["mu11"], m["mu20"] - m["mu02"]))
+    return 90.0 - abs(axis_from_columns)
 
 
 class _Phase(Enum):
@@ -474,6 +492,8 @@ class ShapeEvaluator:
             line_fraction=self.line_fraction,
             leading_end=leading_end(self._reference_contour) if referenced else "",
             speed_px_s=self._speed_px_s(),
+            turn_deg=turn_deg(self._reference_contour) if referenced else math.nan,
+            length_px=float(self._reference.length_px) if referenced else math.nan,
             rejected_frames=self._rejected,
             reference_contour=self._reference_contour,
             line_contour=line_contour,
