@@ -1,10 +1,10 @@
 """`woody soak`: prove the chain stable, by N fillet passages over the roller across every condition.
 
-The conditions and the blow-up test are :mod:`woody_sim.soak`'s, the workers' share and the merge
-:mod:`woody_experiments.soak`'s; this command
-splits the passages over worker processes (each with its own seed, so the
-workers cover different parts of the condition grid), shows progress and
-prints passages, blow-ups, the worst segment speed and the wall time.
+The conditions and the blow-up test are :mod:`woody_sim.soak`'s, a worker's
+share and the merge :mod:`woody_experiments.soak`'s; this command splits the
+passages over worker processes (each with its own seed, so the workers cover
+different parts of the condition grid), shows progress and prints passages,
+blow-ups, the worst segment speed and the wall time.
 Exit status 1 when any passage blew up.
 """
 
