@@ -57,7 +57,7 @@ def objective(means: dict[tuple[float, float], tuple[float, float]]) -> float:
 
 
 def relations(means: dict[tuple[float, float], tuple[float, float]]) -> dict[str, float]:
-    """The figures the issue's done-criteria name, from table means."""
+    """The figures the calibration targets name, from table means."""
     get = {key: value[0] for key, value in means.items()}
     return {"nmdm_k0_100fpm": get.get((100.0, 0.0), math.nan),
             "delta_nmdm_100fpm": get.get((100.0, 100.0), math.nan) - get.get((100.0, 0.0), math.nan),

@@ -457,7 +457,7 @@ def _check_rate(rate: float, speed_fpm: float) -> None:
 def _camera_pose(camera) -> PoseStamped:
     """The camera's optical frame in the world frame (x downstream, z up, the roller edge at x = 0).
 
-    Published latched instead of on /tf: tf2_msgs has no PyPI wheel (README, "Real camera").
+    Published latched instead of on /tf: tf2_msgs has no PyPI wheel (docs/architecture.md).
     """
     pose = PoseStamped()
     pose.header.frame_id = WORLD_FRAME

@@ -14,7 +14,7 @@ maps, a GAN generating new depth maps, rebuilt as watertight meshes with a flat
 bottom). :func:`depth_map_to_mesh` rebuilds depth maps that way and
 :func:`scan_to_depth_map` imports point clouds; in place of the GAN,
 :func:`generate_fillet` builds a procedural fillet from a seed (a blunt,
-irregular outline with a smooth rim on a ringed mesh, ``docs/fillets.md``).
+irregular outline with a smooth rim on a ringed mesh, ``docs/physics.md``, "Generated fillets").
 Every fillet also exposes a :class:`HeightMap` (its top surface seen from
 above), which is what :mod:`woody_sim.fillet_model` slices into segments.
 """
@@ -41,7 +41,7 @@ BUILTIN_GENERATED_SEEDS = (0, 1, 2)
 LENGTH_RANGE = (0.17, 0.208)
 WIDTH_RANGE = (0.094, 0.110)
 THICKNESS_RANGE = (0.021, 0.031)
-"""Fillet dimensions (m) the generator draws from: they bracket the reference meshes (docs/fillets.md)."""
+"""Fillet dimensions (m) the generator draws from: they bracket the reference meshes (docs/physics.md)."""
 RIM_HEIGHT_RANGE = (0.0015, 0.003)
 """Height (m) of the rounded-off rim above the belt (the reference meshes: 2-3 mm)."""
 RIM_WIGGLE_RANGE = (0.0007, 0.0013)
@@ -662,7 +662,7 @@ def generate_fillet(seed: int) -> FilletMesh:
 
     Procedural, not a statistical shape model: three reference meshes cannot
     estimate the modes of real shape variation, so the parameter ranges are
-    chosen to bracket them instead (``docs/fillets.md``).
+    chosen to bracket them instead (``docs/physics.md``, "Generated fillets").
     """
     if int(seed) != seed or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")

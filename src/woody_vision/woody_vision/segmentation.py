@@ -33,7 +33,7 @@ DEFAULT_MIN_AREA_PX = 500
 """Blobs smaller than this are noise or slivers, never a fillet (paper: 500 px)."""
 REAL_CAMERA_FILTERS = {"fill_invalid_px": 4, "median_px": 5, "blur_px": 1.0, "height_threshold_m": 0.005,
                        "color_threshold": 20.0, "color_search_px": 8}
-"""The hole filling and smoothing recommended for a real (or modelled) camera (README, "Real camera"); the
+"""The hole filling and smoothing recommended for a real (or modelled) camera (docs/real-camera.md); the
 height threshold goes back to 5 mm, since a 2 mm cut sits inside a real sensor's ~2 mm depth noise, and the
 outline comes from the registered colour image (20 levels: several times a camera's colour noise, well under
 the fillet-to-belt contrast; docs/sensors.md, "Robustness")."""

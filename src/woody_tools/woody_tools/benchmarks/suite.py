@@ -1,4 +1,4 @@
-"""The figures of `woody bench sim`, `woody bench vision` and `woody bench graph`: the speed figures the README records.
+"""`woody bench sim`, `woody bench vision` and `woody bench graph`: the speed figures of docs/performance.md.
 
 Each benchmark calls the same modules the nodes use; the end-to-end figures
 (line_sim's real-time factor, verdict latency, `woody run`, a sweep) start the

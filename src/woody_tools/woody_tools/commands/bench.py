@@ -1,4 +1,4 @@
-"""`woody bench sim`, `woody bench vision` and `woody bench graph`: the speed figures the README records.
+"""`woody bench sim`, `woody bench vision` and `woody bench graph`: the speed figures of docs/performance.md.
 
 The benchmarks themselves are :mod:`woody_tools.benchmarks`; each figure is also
 printed divided by a fixed reference workload (:func:`woody_tools.benchmarks.suite.reference_ms`).

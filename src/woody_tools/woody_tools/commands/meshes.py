@@ -27,7 +27,7 @@ _COLUMNS = {  # descriptor -> (column title, scale, format)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="meshes_command", required=True, metavar="ACTION")
-    stats = sub.add_parser("stats", help="shape descriptors per mesh and per set (docs/fillets.md)")
+    stats = sub.add_parser("stats", help="shape descriptors per mesh and per set (docs/physics.md, Generated fillets)")
     stats.add_argument("specs", nargs="+", metavar="SPEC",
                        help="a mesh set as `woody run --meshes` takes it: builtin, generated:N[:SEED], a folder, "
                             "a mesh file, or a comma-separated mix; each SPEC is summarised as one set")
