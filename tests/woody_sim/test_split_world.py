@@ -120,3 +120,21 @@ def test_the_worker_ends_when_its_parent_is_killed():
     while time.monotonic() < deadline and os.path.exists(f"/proc/{worker}"):
         time.sleep(0.1)
     assert not os.path.exists(f"/proc/{worker}")
+
+
+def test_a_released_mesh_key_is_never_given_to_another_mesh(meshes):
+    """Placed meshes come and go on a messy line: a mesh registered after a release gets a key of its own, so the
+    worker neither spawns the wrong mesh nor fails to release one."""
+    from woody_sim.meshes import scaled
+
+    placed = [scaled(meshes[0], s) for s in (0.9, 1.0, 1.1)]
+    with SplitLineWorld(GEOMETRY, calibrated_config()) as world:
+        world.model_for(placed[0])
+        world.model_for(placed[1])
+        world.release(placed[0])
+        world.model_for(placed[2])
+        world.release(placed[1])
+        world.release(placed[2])
+        world.plan(world.config.dt)
+        world.step()
+        assert world.segment_poses() == {}

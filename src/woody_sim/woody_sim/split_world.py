@@ -48,7 +48,7 @@ class SplitLineWorld:
         self._asked = self._reached = 0  # the step the worker was last sent to, and the step it answered from
         self._removed: list[int] = []
         self._blown: list[int] = []
-        self._next_id = self._spawned = 0
+        self._next_id = self._spawned = self._next_key = 0
 
     @property
     def time(self) -> float:
@@ -72,7 +72,8 @@ class SplitLineWorld:
         """A mesh is sent to the worker once and named by its key afterwards."""
         key = self._mesh_keys.get(mesh)
         if key is None:
-            key = self._mesh_keys[mesh] = len(self._mesh_keys)
+            key = self._mesh_keys[mesh] = self._next_key  # never a released mesh's key: the worker forgot it
+            self._next_key += 1
             self._worker.send(("mesh", key, mesh))
         return key
 
