@@ -94,6 +94,7 @@ def collect() -> dict[str, list[Row]]:
     from woody_tools.processes import lease_domain
 
     env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
+    os.environ.pop("WOODY_CALIBRATION", None)  # the page documents the installed calibration's defaults
     tables = {}
     with lease_domain(env) as lease:
         for entry, _package, module_name, class_name, _what in NODES:

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from woody_common.calibration import load_calibration
+from woody_common.calibration import resolved_calibration
 from woody_experiments import calibrate
 from woody_sim.meshes import mesh_yaw
 from woody_tools.cli import build_parser
@@ -32,7 +32,7 @@ def test_loo_plans_reference_meshes_only_and_reports_each_fold(tmp_path, monkeyp
     assert calibrate.run_loo("builtin", None, tmp_path) == 0
     assert {r.mesh for r in planned} == set(PHI)  # the generated meshes of 'builtin' are not reference meshes
     assert {(r.k, r.speed_fpm) for r in planned} == {(0.0, 100.0), (100.0, 100.0), (0.0, 130.0), (100.0, 130.0)}
-    mass = load_calibration().total_mass_kg
+    mass = resolved_calibration().total_mass_kg
     assert all(not r.side and r.lanes == 3 and r.mass == mass and r.yaw_deg == 0.0 for r in planned)
     report = json.loads((tmp_path / "loo.json").read_text())
     folds = {f["held_out"]: f for f in report["speeds"]["100"]["folds"]}

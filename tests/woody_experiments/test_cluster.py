@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from woody_common.calibration import load_calibration
+from woody_common.calibration import resolved_calibration
 from woody_experiments import cluster
 from woody_experiments.experiment import RunSpec
 from woody_sim.meshes import BUILTIN_DIR, generate_fillet, load_mesh
@@ -141,7 +141,7 @@ def test_worker_killed_mid_sweep_loses_and_doubles_nothing(dask_cluster, tmp_pat
             assert sweep.wait(240) == 0, (tmp_path / "sweep.log").read_text()[-3000:]
             assert len(client.scheduler_info(n_workers=-1)["workers"]) == 1
     rows = _rows(out / "runs.csv")  # asserts no key twice
-    mass = load_calibration().total_mass_kg
+    mass = resolved_calibration().total_mass_kg
     assert sorted(rows) == sorted(("generated-70000", k, 100.0, lane, mass) for k in (0.0, 50.0, 100.0)
                                   for lane in range(1))
     assert all(r["status"] == "scored" for r in rows.values())

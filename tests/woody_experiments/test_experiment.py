@@ -52,7 +52,7 @@ def test_a_condition_lays_the_fillet_as_drawn_with_the_mass_following_its_size()
 def test_the_colour_outline_keeps_a_stiff_fillet_woody_through_stereo_noise(monkeypatch):
     """seed0000 at k = 100 through the stereo preset: the depth-only outline frays past the Φ threshold (a woody
     fillet graded normal); the registered colour's outline, which the sweep uses for modelled cameras, does not."""
-    from woody_common.calibration import load_calibration
+    from woody_common.calibration import resolved_calibration
     from woody_experiments import experiment
 
     mesh = next(m for m in load_mesh_set("builtin")[0] if m.name == "seed0000")
@@ -62,7 +62,7 @@ def test_the_colour_outline_keeps_a_stiff_fillet_woody_through_stereo_noise(monk
     monkeypatch.setattr(experiment, "REAL_CAMERA_SEGMENTATION",
                         dataclasses.replace(experiment.REAL_CAMERA_SEGMENTATION, color_threshold=0.0))
     (depth_only,) = evaluate_run(spec, mesh)
-    threshold = load_calibration().phi_threshold
+    threshold = resolved_calibration().phi_threshold
     assert with_colour["phi"] < threshold < depth_only["phi"], (with_colour, depth_only)
 
 

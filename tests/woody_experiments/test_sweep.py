@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import subprocess
 import sys
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from woody_common.calibration import resolved_calibration, write_calibration
 from woody_experiments import statistics, sweep_report, traces
 from woody_experiments.experiment import RUN_COLUMNS
 
@@ -29,10 +31,29 @@ def _rows(path: Path) -> list[dict]:
         return list(reader)
 
 
+THRESHOLD = 12.34
+"""The Φ threshold of the calibration the sweep is given (--calibration), not the installed one."""
+
+
+def _calibration(tmp_path: Path) -> Path:
+    """A calibration fitted (says its provenance) on this sweep's own meshes, with its own threshold."""
+    installed = resolved_calibration()
+    calibration = dataclasses.replace(installed, phi_threshold=THRESHOLD,
+                                      provenance={**installed.provenance, "calibration_meshes": MESHES})
+    return write_calibration(calibration, tmp_path / "calibration.yaml")
+
+
+def test_sweep_refuses_a_calibration_it_cannot_read(tmp_path):
+    result = _woody(*ARGS, "--out", str(tmp_path / "sweep"), "--calibration", str(tmp_path / "none.yaml"))
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1].startswith("woody sweep: ")
+    assert "none.yaml: cannot read the calibration" in result.stderr
+
+
 @pytest.mark.slow
 def test_sweep_cli_rows_report_resume(tmp_path):
     out = tmp_path / "sweep"
-    first = _woody(*ARGS, "--out", str(out))
+    first = _woody(*ARGS, "--out", str(out), "--calibration", str(_calibration(tmp_path)))
     assert first.returncode == 0, first.stderr[-2000:]
     rows = _rows(out / "runs.csv")
     # 2 meshes x 2 k x 1 speed x 3 lanes
@@ -72,6 +93,9 @@ def _check_report(out):
     for paper_figure in ("0.520", "0.783", "19.12 ± 5.67", "5.40 ± 2.54", "19.06 ± 5.53", "5.28 ± 2.56"):
         assert paper_figure in md
     assert "evaluations/min" in md
+    # the report grades with the --calibration file and names the mesh set from its provenance
+    assert f"Φ threshold {THRESHOLD:g}" in md
+    assert f"`{MESHES}`; 2 of these meshes are in that calibration set" in md
     assert "**PASS**" in md or "**MISS**" in md
     for name in sweep_report.PLOTS:
         assert (out / name).stat().st_size > 1000

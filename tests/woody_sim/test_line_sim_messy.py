@@ -37,7 +37,7 @@ def ground_truth(ros_node, ros_domain, log_dir, params: dict, count: int = 6) ->
 
 
 def test_a_messy_line_places_each_fillet_by_its_seeded_draw(ros_node, ros_domain, tmp_path):
-    from woody_common.calibration import load_calibration
+    from woody_common.calibration import resolved_calibration
     from woody_sim.line_conditions import LINE_PRESETS, place_mesh, placement_for
     from woody_sim.meshes import load_mesh_set
 
@@ -47,7 +47,7 @@ def test_a_messy_line_places_each_fillet_by_its_seeded_draw(ros_node, ros_domain
     assert [[getattr(t, f) for f in fields] + [t.position.y] for t in first] == \
         [[getattr(t, f) for f in fields] + [t.position.y] for t in again]
     straight = {m.name: m for m in load_mesh_set("builtin")[0]}
-    mass = load_calibration().total_mass_kg
+    mass = resolved_calibration().total_mass_kg
     for truth in first:
         placement = placement_for(LINE_PRESETS["messy"], 7, truth.fillet_id)
         placed = place_mesh(straight[truth.mesh], placement)

@@ -8,13 +8,13 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from woody_common.calibration import load_calibration
+from woody_common.calibration import resolved_calibration
 from woody_sim.fillet_model import SegmentVisual, build_fillet_model, slab_volumes
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config, hinge_state, segment_inertias
 from woody_sim.meshes import BUILTIN_DIR, FilletMesh, load_mesh
 
-MASS = load_calibration().total_mass_kg
+MASS = resolved_calibration().total_mass_kg
 SPEED = 0.508  # 100 FPM
 NEAR_EDGE = LineGeometry(spawn_x=-0.15)
 """Spawn close to the roller so the tests spend their time where the physics happens."""

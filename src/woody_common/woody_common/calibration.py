@@ -1,25 +1,40 @@
-"""The line's calibrated values as data: `config/calibration.yaml`, written by `woody calibrate`.
+"""The line's calibrated values as data: a ROS 2 parameters file written by `woody calibrate`.
 
 The file is a ROS 2 parameters file, so the nodes load it with
-``--ros-args --params-file config/calibration.yaml`` (`woody run` passes it to
-every node): ``line_sim`` gets the physics values, ``grader`` the Φ threshold.
-Its provenance (command, date, mesh sets, targets and the figures reached)
-sits in the same file under a node name no node uses, ``woody_calibration``,
-so one file carries values and history. The sweeps and calibration read it
-with :func:`load_calibration`; nothing rewrites Python source.
+``--ros-args --params-file FILE`` (`woody run` passes it to ``line_sim`` and
+``grader``): ``line_sim`` gets the physics values, ``grader`` the Φ threshold
+and the line's cuts. Its provenance (command, date, mesh sets, targets and the
+figures reached) sits in the same file under a node name no node uses,
+``woody_calibration``, so one file carries values and history.
+
+Which file, decided in one place (:func:`resolve_calibration`): the command's
+``--calibration FILE``, else the environment variable ``WOODY_CALIBRATION``,
+else the calibration installed with this package (``calibration.yaml``, package
+data of ``woody_common.config``, found through :mod:`importlib.resources`;
+in the repository it is a link to ``config/calibration.yaml``, the file
+`woody calibrate` writes, so an editable install always sees the current
+one). :func:`resolved_calibration` reads it; commands resolve it once and pass
+the values (or the path, to worker processes) on. A node started from a params
+file that gives its calibrated parameters reads no file at all
+(:func:`node_defaults`).
 """
 
 from __future__ import annotations
 
 import math
 import numbers
+import os
+from collections.abc import Collection
 from dataclasses import asdict, dataclass, field
+from importlib import resources
 from pathlib import Path
 
 import yaml
 
-DEFAULT_PATH = Path(__file__).resolve().parents[3] / "config" / "calibration.yaml"
-"""The repository's calibration file (the packages are installed editable from the repository)."""
+ENV_VAR = "WOODY_CALIBRATION"
+"""Environment variable naming the calibration file when a command is given no ``--calibration``."""
+PACKAGE_DATA = ("woody_common.config", "calibration.yaml")
+"""The installed calibration: package data of ``woody_common.config``."""
 
 _SECTIONS = {"line_sim": {"total_mass_kg": "mass", "hinge_damping": "damping", "friction_static": "friction_static",
                           "friction_dynamic": "friction_dynamic"},
@@ -28,9 +43,9 @@ _SECTIONS = {"line_sim": {"total_mass_kg": "mass", "hinge_damping": "damping", "
 """Per node: dataclass field -> the node's parameter name."""
 _PROVENANCE = "woody_calibration"
 CUT_FIELDS = ("line_threshold", "moderate_threshold", "severe_threshold")
+"""Fields that are cuts (``CUT_LENGTH`` numbers each) rather than single values."""
 CUT_LENGTH = 5
 """Numbers per cut (woody_vision.grading.CUT_TERMS; woody_common cannot import woody_vision)."""
-"""Fields that are cuts (three numbers each) rather than single values."""
 
 
 @dataclass(frozen=True)
@@ -77,9 +92,44 @@ def _node_key(node: str) -> str:
     return f"/**/{node}"
 
 
-def load_calibration(path: str | Path | None = None) -> Calibration:
-    """Read a calibration file; a missing or malformed one raises ValueError naming the file and the problem."""
-    path = Path(path) if path is not None else DEFAULT_PATH
+def installed_calibration() -> Path:
+    """The calibration installed with woody_common (package data)."""
+    package, name = PACKAGE_DATA
+    return Path(str(resources.files(package).joinpath(name)))
+
+
+def resolve_calibration(explicit: str | Path | None = None) -> Path:
+    """The calibration file to use: ``explicit`` (a command's ``--calibration``), else ``$WOODY_CALIBRATION``,
+    else :func:`installed_calibration`."""
+    if explicit:
+        return Path(explicit)
+    from_env = os.environ.get(ENV_VAR, "")
+    return Path(from_env) if from_env else installed_calibration()
+
+
+def resolved_calibration(explicit: str | Path | None = None) -> Calibration:
+    """Read the calibration :func:`resolve_calibration` picks (the one place a calibration file is read)."""
+    return load_calibration(resolve_calibration(explicit))
+
+
+def node_defaults(node: str, given: Collection[str] | dict = ()) -> dict[str, float | list[float]]:
+    """Parameter name -> value of a node's calibrated parameters (``line_sim`` or ``grader``).
+
+    ``given`` maps the parameters the node was started with (its params file and ``-p``
+    overrides) to their values: when it holds all of them, those are returned and no file
+    is read (a host running only the vision nodes needs no calibration file); otherwise
+    the resolved calibration is read once and supplies them.
+    """
+    names = _SECTIONS[node]
+    if isinstance(given, dict) and all(param in given for param in names.values()):
+        return {param: _value(given[param], name) for name, param in names.items()}
+    calibration = resolved_calibration()
+    return {param: _value(getattr(calibration, name), name) for name, param in names.items()}
+
+
+def load_calibration(path: str | Path) -> Calibration:
+    """Read one calibration file; a missing or malformed one raises ValueError naming the file and the problem."""
+    path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as exc:
@@ -96,8 +146,11 @@ def load_calibration(path: str | Path | None = None) -> Calibration:
 
 
 def write_calibration(calibration: Calibration, path: str | Path | None = None, header: str = "") -> Path:
-    """Write ``calibration`` as a ROS 2 parameters file (atomically: a reader never sees half a file)."""
-    path = Path(path) if path is not None else DEFAULT_PATH
+    """Write ``calibration`` as a ROS 2 parameters file (atomically: a reader never sees half a file).
+
+    ``path`` None writes the resolved calibration (:func:`resolve_calibration`); a link (the installed
+    calibration in the repository) is followed, so the file it points at is the one replaced."""
+    path = resolve_calibration(path).resolve()
     values = {name: _value(value, name) for name, value in asdict(calibration).items() if name != "provenance"}
     data = {_node_key(node): {"ros__parameters": {param: values[name] for name, param in names.items()}}
             for node, names in _SECTIONS.items()}

@@ -63,6 +63,16 @@ def _typed(name: str, default, value):
     return value
 
 
+def calibrated_defaults(node, section: str) -> dict:
+    """Defaults of the node's calibrated parameters (``section``: ``line_sim`` or ``grader``): the values its
+    params file or ``-p`` give when they give all of them (no file read), else the resolved calibration's
+    (woody_common.calibration.node_defaults), read once before the node declares them."""
+    from woody_common.calibration import node_defaults
+
+    given = {name: param.value for name, param in node._parameter_overrides.items()}  # noqa: SLF001
+    return node_defaults(section, given)
+
+
 def check_overrides(node) -> None:
     """`ValueError` naming every ``-p name:=value`` the node did not declare (a typo is otherwise silently ignored)."""
     known = set(node._parameters)  # noqa: SLF001 - rclpy keeps declared names and overrides only privately

@@ -49,7 +49,13 @@ from pathlib import Path
 
 import numpy as np
 
-from woody_common.calibration import CUT_FIELDS, Calibration, load_calibration, write_calibration
+from woody_common.calibration import (
+    CUT_FIELDS,
+    Calibration,
+    resolve_calibration,
+    resolved_calibration,
+    write_calibration,
+)
 from woody_experiments import cluster, evaluation, line_grade, physics_fit
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, load_meshes
@@ -78,7 +84,8 @@ def fit_physics(names: list[str], spec: str, args: argparse.Namespace, client) -
     """Grid search of (M, c, mu) against the paper's side table; the best point's values and the log."""
     def evaluate(point: physics_fit.FitPoint) -> list[dict]:
         runs = [RunSpec(n, k, s, lanes=1, mass=point.mass, damping=point.damping,
-                        friction_static=point.friction_static, top=False, yaw_deg=mesh_yaw(n, args.yaw_sd))
+                        friction_static=point.friction_static, top=False, yaw_deg=mesh_yaw(n, args.yaw_sd),
+                        calibration=args.calibration)
                 for n in names for s in SPEEDS for k in SIDE_K]
         return _evaluate(runs, spec, client, f"M={point.mass:g} c={point.damping:g} mu={point.friction_static:g}")
 
@@ -104,7 +111,8 @@ def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict,
     """Φ cut on the calibration meshes, its accuracy on the held-out ones, and the top-view speed effect."""
     def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
         runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
-                        friction_static=physics["friction_static"], side=False, yaw_deg=mesh_yaw(n, args.yaw_sd))
+                        friction_static=physics["friction_static"], side=False, yaw_deg=mesh_yaw(n, args.yaw_sd),
+                        calibration=args.calibration)
                 for n in names for s in SPEEDS for k in (0.0, 100.0)]
         return _evaluate(runs, spec, client, desc)
 
@@ -125,7 +133,8 @@ def choose_line_cuts(cal_names: list[str], test_names: list[str], physics: dict,
     """The line's three cuts on the calibration meshes, and their figures on the held-out ones."""
     def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
         runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
-                        friction_static=physics["friction_static"], side=False, condition=c)
+                        friction_static=physics["friction_static"], side=False, condition=c,
+                        calibration=args.calibration)
                 for n in names for c in LINE_CONDITIONS for s in LINE_SPEEDS for k in LINE_K]
         return _evaluate(runs, spec, client, desc)
 
@@ -201,8 +210,9 @@ def _provenance(args: argparse.Namespace, report: dict) -> dict:
 def calibrate(args: argparse.Namespace, client) -> int:
     """The whole calibration (or, with ``args.loo``, the leave-one-out check) on the Dask ``client``."""
     out = Path(args.out)
+    args.calibration = str(resolve_calibration(args.calibration).absolute())  # the workers read the same file
     if args.loo:
-        return run_loo(args.meshes or LOO_MESHES, client, out, args.yaw_sd)
+        return run_loo(args.meshes or LOO_MESHES, client, out, args.yaw_sd, args.calibration)
     args.meshes = args.meshes or CALIBRATION_MESHES
     try:
         cal_names = list(load_meshes(args.meshes))
@@ -215,7 +225,11 @@ def calibrate(args: argparse.Namespace, client) -> int:
         print(f"woody calibrate: test meshes overlap the calibration meshes: {overlap}", file=sys.stderr)
         return 2
     out.mkdir(parents=True, exist_ok=True)
-    current = load_calibration(args.calibration)
+    try:
+        current = resolved_calibration(args.calibration)
+    except ValueError as exc:
+        print(f"woody calibrate: {exc}", file=sys.stderr)
+        return 2
     physics = {k: getattr(current, k)
                for k in ("total_mass_kg", "hinge_damping", "friction_static", "friction_dynamic")}
     report: dict = {"calibration_meshes": args.meshes, "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd,
@@ -281,7 +295,7 @@ def _write_md(path: Path, report: dict) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def run_loo(spec: str, client, out: Path, yaw_sd: float = 0.0) -> int:
+def run_loo(spec: str, client, out: Path, yaw_sd: float = 0.0, calibration: str | None = None) -> int:
     """`woody calibrate --loo`: leave-one-mesh-out threshold check on the reference meshes of ``spec``."""
     try:
         names = [n for n in load_meshes(spec) if evaluation.mesh_set(n) == evaluation.SET_REFERENCE]
@@ -293,8 +307,9 @@ def run_loo(spec: str, client, out: Path, yaw_sd: float = 0.0) -> int:
               file=sys.stderr)
         return 2
     out.mkdir(parents=True, exist_ok=True)
-    mass = load_calibration().total_mass_kg
-    runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False, yaw_deg=mesh_yaw(n, yaw_sd)) for n in names
+    mass = resolved_calibration(calibration).total_mass_kg
+    runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False, yaw_deg=mesh_yaw(n, yaw_sd), calibration=calibration)
+            for n in names
             for s in (100.0, 130.0) for k in (evaluation.NORMAL_K, evaluation.SEVERE_K)]
     rows = _evaluate(runs, spec, client, f"leave-one-out ({len(names)} reference meshes)")
     units = evaluation.run_units(rows)

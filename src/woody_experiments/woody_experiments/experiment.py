@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from woody_common.calibration import load_calibration
+from woody_common.calibration import resolved_calibration
 from woody_common.line import fpm_to_mps
 from woody_experiments.conditions import TIDY, run_placement
 from woody_sim.line_conditions import FilletPlacement, place_mesh
@@ -51,7 +51,8 @@ from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer
 from woody_sim.sensor_model import sensor_preset
 from woody_vision.camera_model import LaneLayout
-from woody_vision.grader_core import FilletGrader, TrackObservation
+from woody_vision.grader_core import FilletGrader, TrackObservation, calibrated_rules
+from woody_vision.grading import GradingRules
 from woody_vision.segmentation import REAL_CAMERA_FILTERS, BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.side_view import SidePassageTracker
 from woody_vision.tracking import CentroidTracker
@@ -97,7 +98,7 @@ class RunSpec:
     top_camera: str = "default"
     """Top camera preset (woody_sim.line_geometry.TOP_CAMERA_PRESETS)."""
     damping: float | None = None
-    """Hinge damper c; None = the calibrated one (config/calibration.yaml)."""
+    """Hinge damper c; None = the calibrated one (``calibration``)."""
     friction_static: float | None = None
     """Drive friction cap (mu_dynamic keeps the seed's 0.75 ratio); None = the calibrated one."""
     sensor: str = "ideal"
@@ -106,6 +107,9 @@ class RunSpec:
     """An extra turn about the vertical (woody_sim.meshes.yawed), on top of the condition's placement."""
     condition: str = TIDY
     """How fillets lie on the line (woody_experiments.conditions): tidy, turned, blunt, size or messy."""
+    calibration: str | None = None
+    """The calibration file the run's physics and cuts come from (a path, so a worker process reads the same
+    file); None = the resolved one (woody_common.calibration.resolve_calibration)."""
 
     def physics_overrides(self) -> dict:
         """PhysicsConfig fields this run sets itself (the rest come from the calibration)."""
@@ -150,14 +154,14 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     placement = spec.placement
     mesh = place_mesh(mesh, placement)
     renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side)
-    calibration = load_calibration()
+    calibration = resolved_calibration(spec.calibration)
     world = LineWorld(geometry, config or calibrated_config(calibration, **spec.physics_overrides()))
     speed = fpm_to_mps(spec.speed_fpm)
     mass = (spec.mass if spec.mass is not None else calibration.total_mass_kg) * placement.scale ** 3
     top = side = None
     n_top = 0
     try:
-        top = _TopView(spec, geometry, top_bg) if spec.top else None
+        top = _TopView(spec, geometry, top_bg, calibrated_rules(calibration)) if spec.top else None
         lanes = _LaneCopies(world, renderer, geometry, world.spawn(mesh, k=spec.k, lane=geometry.watched_lane,
                                                                    mass=mass, speed_mps=speed))
         watched_fid = lanes.fillet_id
@@ -232,10 +236,11 @@ class _LaneCopies:
 class _TopView:
     """The top camera of one run as the segmenter and grader see it: sensor model, segmentation, tracking, Φ."""
 
-    def __init__(self, spec: RunSpec, geometry: LineGeometry, background: tuple[np.ndarray, np.ndarray]) -> None:
+    def __init__(self, spec: RunSpec, geometry: LineGeometry, background: tuple[np.ndarray, np.ndarray],
+                 rules: GradingRules) -> None:
         top_cam = geometry.top_camera()
         layout = LaneLayout(tuple(top_cam.k.reshape(-1)), geometry.top_height, spec.lanes, geometry.lane_pitch)
-        self.grader = FilletGrader(geometry.top_edge_row(), watched_lane=None,
+        self.grader = FilletGrader(geometry.top_edge_row(), rules, watched_lane=None,
                                    pixels_per_metre=float(top_cam.k[1, 1]) / geometry.top_height)
         self.tracker = CentroidTracker(lane_layout=layout)
         self.camera, self.rng = sensor_preset(spec.sensor), np.random.default_rng(_sensor_seed(spec))

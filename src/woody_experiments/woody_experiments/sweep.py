@@ -122,11 +122,12 @@ def run_rows(run: RunSpec, mesh) -> list[dict]:
 
 def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
          side: bool = True, top_camera: str = "default", sensor: str = "ideal", yaw_sd: float = 0.0,
-         conditions: tuple[str, ...] = (TIDY,)) -> list[RunSpec]:
+         conditions: tuple[str, ...] = (TIDY,), calibration: str | None = None) -> list[RunSpec]:
     """Runs ordered so that partial results already span the grid (k, speed and condition vary fastest).
 
     The side view is measured on the tidy line only: the paper's side-view tables are about it.
     """
     return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side and condition == TIDY,
-                    top_camera=top_camera, sensor=sensor, yaw_deg=mesh_yaw(name, yaw_sd), condition=condition)
+                    top_camera=top_camera, sensor=sensor, yaw_deg=mesh_yaw(name, yaw_sd), condition=condition,
+                    calibration=calibration)
             for name in mesh_names for condition in conditions for speed in speeds for k in ks]

@@ -18,10 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from woody_common.calibration import load_calibration
+from woody_common.calibration import Calibration, resolved_calibration
 from woody_experiments import evaluation, line_grade
 from woody_experiments.conditions import TIDY
-from woody_experiments.mesh_sets import CALIBRATION_MESHES
 from woody_experiments.paper_targets import (
     ACCURACY_MIN,
     DELTA_NMDM_RANGE,
@@ -149,22 +148,29 @@ class _Grid:
     meshes: list[str]
     side_rows: list[dict]
     """The rows with side-view metrics (the watched lane)."""
+    calibration_meshes: str = ""
+    """The mesh set the calibration was fitted on (its provenance); '' when it does not say."""
 
 
-def _grid(rows: list[dict], threshold: float) -> _Grid:
+def _grid(rows: list[dict], threshold: float, calibration_meshes: str = "") -> _Grid:
     def distinct(column: str) -> list:
         return sorted({r[column] for r in rows})
 
     return _Grid(rows, threshold, distinct("speed_fpm"), distinct("k"), distinct("lane"), distinct("mesh"),
-                 [r for r in rows if math.isfinite(r["nmdm"])])
+                 [r for r in rows if math.isfinite(r["nmdm"])], calibration_meshes)
 
 
-def build(out: Path, meta: dict | None = None, docs: Path | None = None) -> Path:
-    """Write out/results.md and out/*.png from out/runs.csv; with ``docs`` also docs/results.md + docs/results/."""
+def build(out: Path, meta: dict | None = None, docs: Path | None = None,
+          calibration: Calibration | None = None) -> Path:
+    """Write out/results.md and out/*.png from out/runs.csv; with ``docs`` also docs/results.md + docs/results/.
+
+    ``calibration``: the one the sweep ran with (its threshold, cuts and, from its provenance, the mesh set it
+    was fitted on); None = the resolved one (woody_common.calibration.resolve_calibration)."""
     out = Path(out)
-    calibration = load_calibration()
+    calibration = calibration or resolved_calibration()
     rows = load_rows(out / "runs.csv")
-    grid = _grid([r for r in rows if (r.get("condition") or TIDY) == TIDY], calibration.phi_threshold)
+    grid = _grid([r for r in rows if (r.get("condition") or TIDY) == TIDY], calibration.phi_threshold,
+                 str(calibration.provenance.get("calibration_meshes", "")))
     meta = meta or {}
     _plots(grid.rows, out, grid.speeds, grid.ks, grid.lanes, grid.threshold)
     lines = _summary_lines(grid, meta) + _throughput_lines(meta)
@@ -195,7 +201,7 @@ def _summary_lines(grid: _Grid, meta: dict) -> list[str]:
              f"{len(rows)} fillet rows ({sum(r['status'] == 'scored' for r in rows)} with a scored Φ, "
              f"{len(grid.side_rows)} with side-view metrics). Total mass M = "
              f"{', '.join(f'{m:g}' for m in masses)} kg; Φ threshold {grid.threshold:g} "
-             "(`config/calibration.yaml`).\n")
+             "(from the calibration, `woody calibrate`).\n")
     invocations = meta.get("invocations", [])
     if invocations:
         L.append("Command line(s) that produced `runs.csv` (wall time on this machine):\n")
@@ -360,7 +366,7 @@ def _classification(grid: _Grid) -> tuple[list[str], list]:
     """Accuracy, ROC AUC and the best threshold per lane and pooled, at the calibrated threshold."""
     rows, threshold, checks = grid.rows, grid.threshold, []
     L = [f"## Classification per fillet: normal (k = 0) vs severe (k = 100) at Φ threshold {threshold:g}\n",
-         _heldout_note(grid.meshes),
+         _heldout_note(grid.meshes, grid.calibration_meshes),
          "Every lane counts here, pooled over all mesh sets; lanes of one run are not independent, see the "
          "per-set section below for one vote per run with confidence intervals.\n",
          "| FPM | lane | accuracy | right / total | ROC AUC | best possible threshold here (bal. acc.) |",
@@ -455,16 +461,19 @@ def _write_docs(out: Path, docs: Path, text: str) -> None:
     target.write_text(text.replace("{prefix}", "results/") + discussion)
 
 
-def _heldout_note(meshes: list[str]) -> str:
+def _heldout_note(meshes: list[str], calibration_meshes: str) -> str:
+    """Whether the report's meshes are held out from the mesh set the calibration was fitted on."""
+    if not calibration_meshes:
+        return ""
     try:
-        cal = {m.name for m in load_mesh_set(CALIBRATION_MESHES)[0]}
+        cal = {m.name for m in load_mesh_set(calibration_meshes)[0]}
     except Exception:  # noqa: BLE001 - the note is informative only
         return ""
     overlap = sorted(set(meshes) & cal)
     if overlap:
-        return (f"The threshold was chosen by `woody calibrate` on `{CALIBRATION_MESHES}`; {len(overlap)} of these "
+        return (f"The threshold was chosen by `woody calibrate` on `{calibration_meshes}`; {len(overlap)} of these "
                 f"meshes are in that calibration set, so this is **not** fully held out.\n")
-    return (f"The threshold was chosen by `woody calibrate` on the calibration set `{CALIBRATION_MESHES}`; "
+    return (f"The threshold was chosen by `woody calibrate` on the calibration set `{calibration_meshes}`; "
             f"none of the {len(meshes)} meshes here is in it (held out).\n")
 
 

@@ -4,6 +4,11 @@ The node owns the simulation loop instead of a wall-clock timer: it steps
 physics, renders camera frames on the second core (RenderProcess) whenever a
 camera is due in sim time, and publishes them stamped with that sim time, so
 the graph is correct whether it runs paced (``realtime``) or as fast as it can.
+
+The calibrated physics (mass, damping, drive friction) are parameters with
+plain defaults: the params file `woody run` passes is their source; started
+without them, the node reads the resolved calibration once before declaring
+(woody_common.ros_params.calibrated_defaults).
 """
 
 from __future__ import annotations
@@ -25,7 +30,6 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
 from woody_common import topics
-from woody_common.calibration import load_calibration
 from woody_common.images import image_message
 from woody_common.line import (
     BELT_MARGIN_M,
@@ -43,7 +47,7 @@ from woody_common.line import (
     max_fillets_per_minute,
     spacing_at_rate,
 )
-from woody_common.ros_params import declare, run_node
+from woody_common.ros_params import calibrated_defaults, declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
@@ -110,13 +114,13 @@ class LineSim(Node):
         self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, 100000)
         self.spawn_duration = declare(self, "spawn_duration_s", 0.0, "Stop spawning after this much sim time "
                                       "(0 = no limit).", 0.0, MAX_SPAWN_DURATION_S)
-        calibration = load_calibration()
-        self.mass = declare(self, "mass", calibration.total_mass_kg, "Total mass M of a fillet's segment chain (kg); "
+        calibrated = calibrated_defaults(self, "line_sim")  # read once, before declaring; none if given
+        self.mass = declare(self, "mass", calibrated["mass"], "Total mass M of a fillet's segment chain (kg); "
                             "a tuning value (config/calibration.yaml, docs/results.md).", 0.1, MAX_MASS)
-        damping = declare(self, "damping", calibration.hinge_damping, "Hinge damping c (N*m*s/rad).", 0.0, 10.0)
-        mu_static = declare(self, "friction_static", calibration.friction_static, "Coulomb cap of the belt drive "
+        damping = declare(self, "damping", calibrated["damping"], "Hinge damping c (N*m*s/rad).", 0.0, 10.0)
+        mu_static = declare(self, "friction_static", calibrated["friction_static"], "Coulomb cap of the belt drive "
                             "while a segment holds the belt speed.", 0.0, 10.0)
-        mu_dynamic = declare(self, "friction_dynamic", calibration.friction_dynamic, "Coulomb cap of the belt drive "
+        mu_dynamic = declare(self, "friction_dynamic", calibrated["friction_dynamic"], "Coulomb cap of the belt drive "
                              "once a segment slips.", 0.0, 10.0)
         segments = declare(self, "segments", 40, "Rigid segments N per fillet.", 2, 200)
         workers = declare(self, "physics_workers", 1, "Worker processes that simulate every other fillet on "

@@ -53,7 +53,7 @@ import numba
 import numpy as np
 import pybullet as p
 
-from woody_common.calibration import Calibration, load_calibration
+from woody_common.calibration import Calibration, resolved_calibration
 from woody_sim.belt_drive import belt_drive
 from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
 from woody_sim.hinge_law import chain_mass_matrix, hinge_state, implicit_hinge_torque
@@ -168,8 +168,9 @@ def seed_dynamic_friction(friction_static: float) -> float:
 
 
 def calibrated_config(calibration: Calibration | None = None, **overrides) -> PhysicsConfig:
-    """PhysicsConfig with the calibrated damper and drive friction (config/calibration.yaml), plus overrides."""
-    cal = calibration or load_calibration()
+    """PhysicsConfig with the calibrated damper and drive friction, plus overrides (``calibration`` None: the
+    resolved one, woody_common.calibration.resolve_calibration)."""
+    cal = calibration or resolved_calibration()
     values = {"damping": cal.hinge_damping, "friction_static": cal.friction_static,
               "friction_dynamic": cal.friction_dynamic}
     return PhysicsConfig(**{**values, **overrides})

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from woody_common.calibration import load_calibration
+from woody_common.calibration import resolved_calibration
 from woody_vision.grading import FilletConditions, GradingRules
 from woody_vision.shape_score import (
     LEADING_BLUNT,
@@ -95,8 +95,9 @@ class FilletGrader:
     """Per-track shape evaluation, classification and side-view pairing."""
 
     edge_row: float
-    rules: GradingRules = field(default_factory=lambda: calibrated_rules(load_calibration()))
-    """Default: the calibrated line cuts (config/calibration.yaml)."""
+    rules: GradingRules = field(default_factory=lambda: calibrated_rules(resolved_calibration()))
+    """Default: the line cuts of the resolved calibration (woody_common.calibration.resolve_calibration); the
+    grader node and the experiment runs always pass theirs."""
     watched_lane: int | None = None
     side_wait_s: float = DEFAULT_SIDE_WAIT_S
     evaluator_options: dict = field(default_factory=dict)

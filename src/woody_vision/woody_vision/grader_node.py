@@ -5,6 +5,13 @@ the top camera's calibration (K from camera_info, plus the camera height and
 the edge offset from its optical axis as parameters), never from a pixel
 constant; the side view's roller axle and radius are parameters of that
 camera's calibration.
+
+The Φ threshold and the line's cuts are parameters with plain defaults: the
+params file the node is started with (`woody run` passes the calibration) is
+their source; a grader started without them reads the resolved calibration
+once, before declaring (woody_common.ros_params.calibrated_defaults), and
+never inside a default. Nothing here imports the simulator, so the node runs
+on a vision-only host.
 """
 
 from __future__ import annotations
@@ -23,7 +30,6 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import ImageMarker
 
 from woody_common import topics
-from woody_common.calibration import load_calibration
 from woody_common.line import (
     LANES,
     SIDE_AXLE_PX,
@@ -31,7 +37,7 @@ from woody_common.line import (
     TOP_CAMERA_HEIGHT_M,
     TOP_EDGE_OFFSET_M,
 )
-from woody_common.ros_params import declare, run_node
+from woody_common.ros_params import calibrated_defaults, declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletTrackArray, FilletVerdict
 from woody_vision.camera_model import edge_row
@@ -68,21 +74,7 @@ class Grader(Node):
 
     def __init__(self) -> None:
         super().__init__("grader")
-        calibration = load_calibration()
-        self.score = declare(self, "score", SCORE_LINE, "What the verdict grades: line (line_phi against cuts that "
-                             "follow the measured speed and leading end; robust on a messy line) or paper (the "
-                             "paper's Φ against the single threshold; no grade).")
-        if self.score not in SCORES:
-            raise ValueError(f"score must be one of {', '.join(SCORES)}, got {self.score!r}")
-        paper = declare(self, "threshold", calibration.phi_threshold, "With score paper: Φ below this is woody "
-                        "(stiff fillets deform less); the default is the calibrated one.", 0.001, 1000.0)
-        cuts = [Cut.of(declare(self, name, list(getattr(calibration, name)), text)) for name, text in (
-            ("line_threshold", "With score line: the reject cut on line_phi, [base at 100 FPM, narrow end first, "
-             "straight, 0.19 m long; d ln(cut)/d speed per m/s; ln offset blunt end first; d ln(cut)/d turn per "
-             "degree; d ln(cut)/d length per m]; the default is the calibrated one."),
-            ("moderate_threshold", "With score line: line_phi below this cut grades at least moderate (same form)."),
-            ("severe_threshold", "With score line: line_phi below this cut grades severe (same form)."))]
-        self.rules = GradingRules(paper) if self.score == SCORE_PAPER else GradingRules(*cuts)
+        self.rules = self._declare_rules()
         self.camera_height = declare(self, "camera_height_m", TOP_CAMERA_HEIGHT_M,
                                      "Top camera height above the belt (m).", 0.05, 10.0)
         self.edge_offset = declare(self, "roller_edge_offset_m", TOP_EDGE_OFFSET_M,
@@ -133,6 +125,24 @@ class Grader(Node):
             self.create_subscription(Image, topics.SIDE_IMAGE, self.on_side_image, sensor)
         self.create_timer(0.1, self.on_timer)
         self.frame_id = ""
+
+    def _declare_rules(self) -> GradingRules:
+        """Declare ``score``, the paper's threshold and the line's three cuts; the rules the score uses."""
+        defaults = calibrated_defaults(self, "grader")
+        self.score = declare(self, "score", SCORE_LINE, "What the verdict grades: line (line_phi against cuts that "
+                             "follow the measured speed and leading end; robust on a messy line) or paper (the "
+                             "paper's Φ against the single threshold; no grade).")
+        if self.score not in SCORES:
+            raise ValueError(f"score must be one of {', '.join(SCORES)}, got {self.score!r}")
+        paper = declare(self, "threshold", defaults["threshold"], "With score paper: Φ below this is woody "
+                        "(stiff fillets deform less); the default is the calibrated one.", 0.001, 1000.0)
+        cuts = [Cut.of(declare(self, name, defaults[name], text)) for name, text in (
+            ("line_threshold", "With score line: the reject cut on line_phi, [base at 100 FPM, narrow end first, "
+             "straight, 0.19 m long; d ln(cut)/d speed per m/s; ln offset blunt end first; d ln(cut)/d turn per "
+             "degree; d ln(cut)/d length per m]; the default is the calibrated one."),
+            ("moderate_threshold", "With score line: line_phi below this cut grades at least moderate (same form)."),
+            ("severe_threshold", "With score line: line_phi below this cut grades severe (same form)."))]
+        return GradingRules(paper) if self.score == SCORE_PAPER else GradingRules(*cuts)
 
     def on_camera_info(self, info: CameraInfo) -> None:
         if self.core is None and info.k[0] > 0:

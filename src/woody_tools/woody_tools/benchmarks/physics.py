@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import time
 
-from woody_common.calibration import load_calibration
+from woody_common.calibration import resolved_calibration
 from woody_common.line import fpm_to_mps
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
 from woody_sim.meshes import generate_fillet
@@ -25,8 +25,9 @@ def benchmark_physics(
     """
     if n_fillets < 1 or seconds <= 0.0:
         raise ValueError("benchmark needs n_fillets >= 1 and seconds > 0")
-    world = LineWorld(config=config or calibrated_config())
-    mass = load_calibration().total_mass_kg
+    calibration = resolved_calibration()
+    world = LineWorld(config=config or calibrated_config(calibration))
+    mass = calibration.total_mass_kg
     try:
         speed = fpm_to_mps(100.0)
         meshes = [generate_fillet(seed) for seed in range(3)]

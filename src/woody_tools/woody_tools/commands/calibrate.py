@@ -32,7 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--skip-threshold", action="store_true", help="fit the physics only")
     parser.add_argument("--out", default="calibration-out", help="folder for calibration.json / calibration.md")
     parser.add_argument("--calibration", default=None,
-                        help="calibration file to write (default config/calibration.yaml)")
+                        help="calibration file to start from and write (default $WOODY_CALIBRATION, else the installed "
+                             "config/calibration.yaml)")
     parser.add_argument("--dry-run", action="store_true", help="print the results, do not write the calibration")
     arguments.add_yaw_sd(parser, "every step, --loo too; recorded in the calibration's provenance")
     parser.add_argument("--loo", action="store_true",

@@ -13,7 +13,7 @@ import math
 import re
 import sys
 
-from woody_common.calibration import DEFAULT_PATH as CALIBRATION_PATH
+from woody_common.calibration import ENV_VAR, resolve_calibration, resolved_calibration
 from woody_common.line import (
     LANE_PITCH_M,
     MAX_SIDE_RATE_HZ,
@@ -64,9 +64,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m)")
-    parser.add_argument("--calibration", default=str(CALIBRATION_PATH),
+    parser.add_argument("--calibration", default=None, metavar="FILE",
                         help="calibration file given to line_sim and the grader as a ROS params file "
-                             "(default config/calibration.yaml)")
+                             f"(default ${ENV_VAR}, else the installed config/calibration.yaml)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
     parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
                         help="top camera error model (docs/sensors.md); default ideal")
@@ -148,6 +148,16 @@ def _validate(args: argparse.Namespace) -> None:
     _validate_line(args)
     _validate_crowding(args)
     _validate_grading(args)
+    _validate_calibration(args)
+
+
+def _validate_calibration(args: argparse.Namespace) -> None:
+    """Resolve ``--calibration`` to the file the nodes are given, refusing one that is not a calibration."""
+    args.calibration = str(resolve_calibration(args.calibration))
+    try:
+        resolved_calibration(args.calibration)
+    except ValueError as exc:
+        raise RunRefused(str(exc)) from None
 
 
 def _validate_line(args: argparse.Namespace) -> None:

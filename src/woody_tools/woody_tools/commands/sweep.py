@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from woody_common.calibration import load_calibration
+from woody_common.calibration import ENV_VAR, resolve_calibration, resolved_calibration
 from woody_experiments import cluster, sweep, sweep_report, traces
 from woody_experiments.conditions import SWEEP_CONDITIONS, TIDY
 from woody_experiments.experiment import RunSpec
@@ -49,8 +49,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="identical fillets side by side per run: one simulated chain, seen in every lane "
                              "(default 3)")
     parser.add_argument("--out", default="sweep-out", help="output folder (runs.csv, results.md, *.png)")
+    parser.add_argument("--calibration", default=None, metavar="FILE",
+                        help=f"calibration file the runs and the report use (default ${ENV_VAR}, else the installed "
+                             "config/calibration.yaml)")
     parser.add_argument("--mass", type=arguments.POSITIVE_NUMBER, default=None,
-                        help="total chain mass M in kg (default: the calibrated one, config/calibration.yaml)")
+                        help="total chain mass M in kg (default: the calibration's)")
     parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
                         help="top camera error model (docs/sensors.md); use its own --out; default ideal")
     parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
@@ -76,8 +79,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    mass = float(args.mass) if args.mass is not None else load_calibration().total_mass_kg
     try:
+        calibration_path = str(resolve_calibration(args.calibration).absolute())  # workers read the same file
+        calibration = resolved_calibration(calibration_path)
         meshes = load_meshes(args.meshes)
     except ValueError as exc:
         print(f"woody sweep: {exc}", file=sys.stderr)
@@ -85,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     if not meshes:
         print("woody sweep: no usable meshes", file=sys.stderr)
         return 2
+    mass = float(args.mass) if args.mass is not None else calibration.total_mass_kg
     names = list(meshes)
     csv_path = out / sweep.CSV_FILE
     mismatch = _folder_mismatch(out / sweep.META_FILE, args)
@@ -93,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     done, runs_file = sweep.completed_runs(csv_path, args.lanes, out if args.traces else None)
     runs = sweep.plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, top_camera=args.top_camera,
-                      sensor=args.sensor, yaw_sd=args.yaw_sd, conditions=tuple(args.conditions))
+                      sensor=args.sensor, yaw_sd=args.yaw_sd, conditions=tuple(args.conditions),
+                      calibration=calibration_path)
     todo = [r for r in runs if sweep.run_key(r.mesh, r.k, r.speed_fpm, mass, r.condition) not in done]
     where = args.scheduler or f"a local Dask cluster of {min(args.jobs, max(1, len(todo)))} workers"
     print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds x "
@@ -105,16 +111,17 @@ def run(args: argparse.Namespace) -> int:
         return 2
     meta = _update_meta(out / sweep.META_FILE, failed, args, len(names), mass)
     if not args.no_report:
-        md = sweep_report.build(out, meta, docs=Path(args.docs) if args.docs else None)
+        md = sweep_report.build(out, meta, docs=Path(args.docs) if args.docs else None,
+                                calibration=calibration)
         print(f"woody sweep: wrote {md}", file=sys.stderr)
     if args.traces:
-        _report_traces(out)
+        _report_traces(out, calibration.phi_threshold)
     return 1 if failed.failed else 0
 
 
-def _report_traces(out: Path) -> None:
+def _report_traces(out: Path, threshold: float) -> None:
     rows = traces.join(out)
-    plots = traces.plot(out, rows, W1, W2, load_calibration().phi_threshold)
+    plots = traces.plot(out, rows, W1, W2, threshold)
     print(f"woody sweep: wrote {out / traces.TRACE_CSV} ({len(rows)} frames) and {len(plots)} trace plots in "
           f"{out / traces.TRACE_DIR}", file=sys.stderr)
 
@@ -185,6 +192,8 @@ def _argv(args: argparse.Namespace) -> list[str]:
            "--jobs", str(args.jobs), "--out", str(args.out)]
     if args.scheduler:
         out += ["--scheduler", args.scheduler]
+    if args.calibration:
+        out += ["--calibration", str(args.calibration)]
     if args.mass is not None:
         out += ["--mass", f"{args.mass:g}"]
     if args.top_camera != "default":
