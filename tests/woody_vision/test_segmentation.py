@@ -354,3 +354,37 @@ def test_background_model_learns_the_colour_of_the_empty_belt():
         BackgroundModel(1).add(depth, np.zeros((4, 4, 3), np.uint8))
     model.reset()
     assert model.color is None and not model.ready
+
+
+def render_flat(placed: list[tuple[int, object, float]], pitch: float = 0.11) -> tuple[np.ndarray, np.ndarray, float]:
+    """Depth and background of simulated fillets lying flat: (lane, mesh, lateral offset) each; and px per metre."""
+    from woody_sim.line_geometry import LineGeometry
+    from woody_sim.line_world import LineWorld, calibrated_config
+    from woody_sim.rendering import LineRenderer
+
+    geometry = LineGeometry(lanes=2, lane_pitch=pitch, spawn_x=-0.3)
+    renderer = LineRenderer(geometry, render_side=False)
+    background = renderer.render_top({})[1]
+    with LineWorld(geometry, calibrated_config()) as world:
+        for lane, mesh, offset in placed:
+            fid = world.spawn(mesh, 0.0, lane, 20.0, 0.508, lateral_offset=offset)
+            renderer.add_fillet(fid, lane, world.model(fid).visuals)
+        world.step()
+        depth = renderer.render_top(world.segment_poses())[1]
+    return depth, background, float(geometry.top_camera().k[0, 0]) / geometry.top_height
+
+
+def test_fillets_lying_side_by_side_along_their_length_are_split_by_height():
+    """Two large fillets pushed together across a 0.11 m lane pitch: one solid blob without notches, which only
+    the height relief (two thick middles) tells apart; a single turned large fillet, as wide, stays whole."""
+    from woody_sim.meshes import generate_fillet, scaled, yawed
+
+    big = [scaled(generate_fillet(seed), 1.15) for seed in (0, 5)]
+    depth, background, px_per_m = render_flat([(0, big[0], -0.02), (1, big[1], 0.02)])
+    wide = SegmentationParams(split_width_px=0.13 * px_per_m)
+    assert len(segment_depth(depth, background)) == 1, "precondition: one blob without the width check"
+    halves = segment_depth(depth, background, wide)
+    assert len(halves) == 2 and min(b.area_px for b in halves) > 0.35 * sum(b.area_px for b in halves)
+    depth, background, _ = render_flat([(0, yawed(big[0], 35.0), 0.0)])
+    (whole,) = segment_depth(depth, background, wide)
+    assert whole.bbox[2] > wide.split_width_px

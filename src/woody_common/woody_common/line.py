@@ -2,15 +2,25 @@
 
 The simulator builds its geometry from them (`woody_sim.line_geometry`), and the
 vision nodes take them as parameter defaults, so a vision-only host on a real
-line reads them without pybullet. tests/test_line.py checks that the side
+line reads them without pybullet. tests/woody_common/test_line.py checks that the side
 camera's pixel values are the ones the simulator's geometry projects.
 """
 
 FPM_TO_MPS = 0.3048 / 60.0
-"""Feet per minute to metres per second (100 FPM = 0.508 m/s)."""
+"""Feet per minute to metres per second (100 FPM = 0.508 m/s); convert with :func:`fpm_to_mps` and
+:func:`mps_to_fpm`."""
 
 SPEED_RANGE_FPM = (1.0, 400.0)
-"""Line speeds every entry point accepts (woody run, line_sim, reject_gate), inclusive."""
+"""Line speeds every entry point accepts (woody run, line_sim, reject_gate, LineWorld in m/s), inclusive."""
+PAPER_SPEEDS_FPM = (100.0, 130.0)
+"""The paper's two commercial line speeds (its tables, the sweep's and calibration's default speeds)."""
+NORMAL_K = 0.0
+SEVERE_K = 100.0
+"""Hinge stiffness (N m/rad) of the paper's two classes, normal and severe woody breast: the reject decision is
+fitted and scored on them, and a line mixes them by default."""
+CLASS_K = (NORMAL_K, SEVERE_K)
+MAX_LANES = 6
+"""Most lanes any entry point accepts (lanes 1..MAX_LANES; a side lane -1 = centre, or 0..MAX_LANES - 1)."""
 MAX_SIDE_RATE_HZ = 400.0
 """Fastest side camera line_sim and woody run accept (0 turns it off)."""
 MAX_SPAWN_DURATION_S = 1e6
@@ -42,13 +52,20 @@ TOP_EDGE_OFFSET_M = 0.20
 
 SIDE_AXLE_PX = (480.0, 348.0)
 """(u, v) of the roller axle in the 960 x 696 side image (the image is centred on the axle)."""
+ROLLER_RADIUS_M = 0.0207
+"""The seed system's end roller (the simulator's roller, woody_sim.line_geometry.LineGeometry)."""
 SIDE_ROLLER_RADIUS_PX = 48.0
-"""The 20.7 mm end roller at the side camera's 0.431 mm/px (the paper's system)."""
+"""ROLLER_RADIUS_M at the side camera's 0.431 mm/px (the paper's system)."""
 
 
 def fpm_to_mps(speed_fpm: float) -> float:
     """Convert the user-facing line speed in feet per minute to m/s."""
     return float(speed_fpm) * FPM_TO_MPS
+
+
+def mps_to_fpm(speed_mps: float) -> float:
+    """Convert a belt speed in m/s (ground truth, the simulator) to feet per minute."""
+    return float(speed_mps) / FPM_TO_MPS
 
 
 def belt_width_m(lanes: int, lane_pitch_m: float) -> float:
@@ -80,4 +97,10 @@ def max_fillets_per_minute(speed_mps: float) -> float:
 
 REFERENCE_SPEED_FPM = 100.0
 """The paper's line speed: the default of every entry point, and where a speed-dependent cut takes its base."""
-REFERENCE_SPEED_MPS = REFERENCE_SPEED_FPM * FPM_TO_MPS
+REFERENCE_SPEED_MPS = fpm_to_mps(REFERENCE_SPEED_FPM)
+MAX_SPEED_MPS = fpm_to_mps(SPEED_RANGE_FPM[1])
+"""The fastest belt in m/s (the simulator refuses a faster one as a unit mistake)."""
+
+MAX_FILLET_WIDTH_M = 0.13
+"""The widest a single fillet lies across the flow when straight (generated widths reach 0.11 m, sizes x1.15):
+a blob wider than this may be two fillets side by side (the segmenter checks it by height)."""

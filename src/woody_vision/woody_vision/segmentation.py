@@ -6,7 +6,12 @@ and only for components that look like several fillets (low solidity), a
 watershed on the distance transform seeded from its cores (or, for fillets
 touching side by side along a long contact, which leave a single core, from the
 two halves of a cut between the contact's end notches), so fillets touching in
-a lane or across lanes come apart. Blobs under ``min_area_px`` are dropped.
+a lane or across lanes come apart. A component wider across the flow than
+one fillet can be (``split_width_px``) may be two fillets lying side by side
+along their whole length, solid as one and without notches: it is split by a
+watershed on the height map from its thick cores, since the touching rims are
+a few millimetres high and the fillets' middles centimetres. Blobs under
+``min_area_px`` are dropped.
 
 Everything per pixel is OpenCV/numpy; the Python loop runs over components
 (a handful per frame) and works on each component's bounding-box ROI.
@@ -65,6 +70,12 @@ class SegmentationParams:
     """Components less solid (area / hull area) than this are checked for several fillets."""
     core_ratio: float = 0.5
     """Watershed markers: the component's pixels farther than this × its max distance from the border."""
+    height_core_ratio: float = 0.75
+    """Markers of a wide component split by height: its pixels higher than this × its highest pixel (two
+    fillets' middles stay apart above three quarters of the thicker one's height, also when they overlap)."""
+    split_width_px: float = 0.0
+    """Components wider than this across the flow (columns) are checked for fillets side by side by height
+    (0 = off; the segmenter sets it from the camera and ``max_fillet_width_m``)."""
     fill_invalid_px: int = 0
     """Pixels without a depth measurement take the mean height of the valid ones within this radius (0 = off):
     a real camera's holes at a fillet's border would otherwise notch its contour."""
@@ -90,8 +101,11 @@ class SegmentationParams:
             raise ValueError(f"open_kernel_px must be >= 0, got {self.open_kernel_px}")
         if not 0.0 < self.split_solidity <= 1.0:
             raise ValueError(f"split_solidity must be in (0, 1], got {self.split_solidity}")
-        if not 0.0 < self.core_ratio < 1.0:
-            raise ValueError(f"core_ratio must be in (0, 1), got {self.core_ratio}")
+        if not (0.0 < self.core_ratio < 1.0 and 0.0 < self.height_core_ratio < 1.0):
+            raise ValueError(f"core_ratio and height_core_ratio must be in (0, 1), got {self.core_ratio}, "
+                             f"{self.height_core_ratio}")
+        if not self.split_width_px >= 0.0:
+            raise ValueError(f"split_width_px must be >= 0, got {self.split_width_px}")
         if self.color_threshold < 0 or self.color_search_px < 0:
             raise ValueError(f"color_threshold and color_search_px must be >= 0, got {self.color_threshold}, "
                              f"{self.color_search_px}")
@@ -269,7 +283,7 @@ def segment_mask(mask: np.ndarray | None, height: np.ndarray, params: Segmentati
         component = _pad(cv2.compare(labels[y0:y1, x0:x1], label, cv2.CMP_EQ))
         origin = (cx0 + x0 - 1, cy0 + y0 - 1)
         height_roi = _pad(height[y0:y1, x0:x1])
-        for part, contour in _split_component(component, params):
+        for part, contour in _split_component(component, height_roi, params):
             blob = _make_blob(part, contour, height_roi, origin, params.min_area_px)
             if blob is not None:
                 blobs.append(blob)
@@ -282,23 +296,47 @@ def _pad(roi: np.ndarray) -> np.ndarray:
     return cv2.copyMakeBorder(roi, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
 
 
-def _split_component(component: np.ndarray, params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
+def _split_component(component: np.ndarray, height: np.ndarray,
+                     params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
     """Masks of the fillets in one connected component (itself if it looks like one fillet), each with its
     outline when already known (None: to be traced)."""
     contour = _largest_contour(component)
     hull_area = cv2.contourArea(cv2.convexHull(contour))
-    if hull_area <= 0.0 or cv2.contourArea(contour) / hull_area >= params.split_solidity:
-        return [(component, contour)]
+    solid = hull_area <= 0.0 or cv2.contourArea(contour) / hull_area >= params.split_solidity
+    wide = 0.0 < params.split_width_px < cv2.boundingRect(contour)[2]
+    parts = None if solid else _split_by_distance(component, contour, params)
+    if parts is None and wide:
+        parts = _split_by_height(component, height, params)
+    return parts or [(component, contour)]
+
+
+def _split_by_distance(component: np.ndarray, contour: np.ndarray,
+                       params: SegmentationParams) -> list[tuple[np.ndarray, None]] | None:
+    """A non-convex component split at its necks (distance-transform watershed), or None if it is one fillet."""
     distance = cv2.distanceTransform(component, cv2.DIST_L2, 5)
     cores = (distance > params.core_ratio * float(distance.max())).astype(np.uint8)
     n_cores, markers = cv2.connectedComponents(cores, connectivity=8, ltype=cv2.CV_32S)
     if n_cores <= 2:  # one core: one non-convex fillet, or two side by side along a long contact
         halves = _cut_between_notches(component, contour, params)
         if halves is None:
-            return [(component, contour)]
+            return None
         n_cores, markers = 3, halves
     labels = _flood(distance, markers, component)
     return [(np.where(labels == core, np.uint8(255), np.uint8(0)), None) for core in range(1, n_cores)]
+
+
+def _split_by_height(component: np.ndarray, height: np.ndarray,
+                     params: SegmentationParams) -> list[tuple[np.ndarray, None]] | None:
+    """A wide component split into the fillets around its thick cores (height watershed), or None if it has one."""
+    relief = cv2.bitwise_and(np.asarray(height, np.float32), np.asarray(height, np.float32), mask=component)
+    cores = cv2.compare(relief, params.height_core_ratio * float(relief.max()), cv2.CMP_GT)
+    n_cores, markers, stats, _ = cv2.connectedComponentsWithStats(cores, connectivity=8, ltype=cv2.CV_32S)
+    big = [c for c in range(1, n_cores) if stats[c, cv2.CC_STAT_AREA] * 8 >= params.min_area_px]
+    if len(big) < 2:
+        return None
+    markers = np.where(np.isin(markers, big), markers, 0).astype(np.int32)
+    labels = _flood(relief, markers, component)
+    return [(np.where(labels == core, np.uint8(255), np.uint8(0)), None) for core in big]
 
 
 NOTCH_DEPTH_RATIO = 0.1

@@ -13,6 +13,7 @@ no depth-only outline, which is another shape, enters a fillet's score).
 from __future__ import annotations
 
 import array
+import dataclasses
 import sys
 
 import cv2
@@ -24,7 +25,7 @@ from std_msgs.msg import Empty
 
 from woody_common import topics
 from woody_common.images import image_message
-from woody_common.line import LANE_PITCH_M, LANES, TOP_CAMERA_HEIGHT_M
+from woody_common.line import LANE_PITCH_M, LANES, MAX_FILLET_WIDTH_M, MAX_LANES, TOP_CAMERA_HEIGHT_M
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import stamp_to_seconds
 from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
@@ -57,8 +58,11 @@ class Segmenter(Node):
             color_search_px=declare(self, "color_search_px", 8, "Colour refines the outline only this close to the "
                                     "depth mask (px).", 0, 100),
         )
-        self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, 6)
+        self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
         self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Distance between lane centres (m).", 0.01, 2.0)
+        self.max_fillet_width = declare(self, "max_fillet_width_m", MAX_FILLET_WIDTH_M, "A blob wider across the "
+                                        "flow than this is checked for two fillets side by side (m; 0 = off).",
+                                        0.0, 2.0)
         self.camera_height = declare(self, "camera_height_m", TOP_CAMERA_HEIGHT_M,
                                      "Top camera height above the belt (m), part of its extrinsic calibration.",
                                      0.05, 10.0)
@@ -97,6 +101,8 @@ class Segmenter(Node):
     def on_camera_info(self, info: CameraInfo) -> None:
         if self.tracker is None and info.k[0] > 0:
             layout = LaneLayout(tuple(info.k), self.camera_height, self.lanes, self.lane_pitch)
+            self.params = dataclasses.replace(
+                self.params, split_width_px=self.max_fillet_width * info.k[0] / self.camera_height)
             self.tracker = CentroidTracker(lane_layout=layout, **self.tracker_options)
             self.info_size = (info.width, info.height)
             self.get_logger().info(f"calibration received: fx={info.k[0]:.1f}, {info.width}x{info.height}")
