@@ -3,14 +3,23 @@
 import pytest
 
 from woody_common.line import (
+    CLASS_K,
     FPM_TO_MPS,
     LANE_PITCH_M,
     LANES,
+    MAX_LANES,
+    MAX_SPEED_MPS,
+    PAPER_SPEEDS_FPM,
+    REFERENCE_SPEED_FPM,
+    REFERENCE_SPEED_MPS,
+    ROLLER_RADIUS_M,
     SIDE_AXLE_PX,
     SIDE_ROLLER_RADIUS_PX,
+    SPEED_RANGE_FPM,
     TOP_CAMERA_HEIGHT_M,
     TOP_EDGE_OFFSET_M,
     fpm_to_mps,
+    mps_to_fpm,
 )
 from woody_sim.line_geometry import LineGeometry
 
@@ -29,3 +38,20 @@ def test_top_camera_and_lanes_are_the_geometry_defaults():
 
 def test_100_fpm_is_0_508_mps():
     assert fpm_to_mps(100) == pytest.approx(0.508) == 100 * FPM_TO_MPS
+
+
+def test_conversions_round_trip_through_one_factor():
+    for fpm in (*SPEED_RANGE_FPM, *PAPER_SPEEDS_FPM, 117.5):
+        assert mps_to_fpm(fpm_to_mps(fpm)) == pytest.approx(fpm, rel=1e-12)
+    assert REFERENCE_SPEED_MPS == fpm_to_mps(REFERENCE_SPEED_FPM)
+    assert MAX_SPEED_MPS == fpm_to_mps(SPEED_RANGE_FPM[1])  # one speed limit, in either unit
+    assert REFERENCE_SPEED_FPM in PAPER_SPEEDS_FPM
+
+
+def test_roller_lanes_and_classes_are_the_simulators():
+    geometry = LineGeometry()
+    assert geometry.roller_radius == ROLLER_RADIUS_M
+    LineGeometry(lanes=MAX_LANES)
+    with pytest.raises(ValueError, match=f"1..{MAX_LANES}"):
+        LineGeometry(lanes=MAX_LANES + 1)
+    assert CLASS_K == (0.0, 100.0)

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from woody_common.line import REFERENCE_SPEED_MPS
-from woody_vision.grading import TIDY, Cut, FilletConditions, GradingRules
+from woody_vision.grading import TIDY, Cut, FilletConditions, GradingRules, is_woody_array
 
 
 def test_grading_rules_classify_lower_phi_as_woody():
@@ -65,3 +65,10 @@ def test_a_cut_allows_for_a_turned_or_longer_fillet():
     assert cut.at(FilletConditions(turn_deg=20.0)) == pytest.approx(8.0 * math.exp(-0.2))
     assert cut.at(FilletConditions(length_m=0.24)) == pytest.approx(8.0 * math.exp(0.1))
     assert cut.at(FilletConditions(turn_deg=math.nan, length_m=math.nan)) == pytest.approx(8.0)
+
+
+def test_one_rule_strictly_below_for_a_fillet_and_for_arrays():
+    rules = GradingRules(10.0)
+    scores = [9.99, 10.0, 10.01]
+    assert list(is_woody_array(scores, 10.0)) == [rules.is_woody(s) for s in scores] == [True, False, False]
+    assert is_woody_array([[1.0], [3.0]], [2.0, 4.0]).tolist() == [[True, True], [False, True]]  # broadcasts

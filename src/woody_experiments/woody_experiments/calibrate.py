@@ -56,6 +56,7 @@ from woody_common.calibration import (
     resolved_calibration,
     write_calibration,
 )
+from woody_common.line import CLASS_K, NORMAL_K, PAPER_SPEEDS_FPM, SEVERE_K
 from woody_experiments import cluster, evaluation, line_grade, physics_fit
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, load_meshes
@@ -64,7 +65,7 @@ from woody_experiments.sweep import run_rows
 from woody_sim.meshes import mesh_yaw
 
 SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
-SPEEDS = (100.0, 130.0)
+SPEEDS = PAPER_SPEEDS_FPM
 LINE_SPEEDS = (90.0, 100.0, 115.0, 130.0, 140.0)
 """The line cuts are fitted over the speeds a line runs at, the paper's two among them."""
 LINE_K = (0.0, 10.0, 20.0, 40.0, 100.0)
@@ -103,7 +104,7 @@ def fit_physics(names: list[str], spec: str, args: argparse.Namespace, client) -
 
 def _phi_split(rows: list[dict]) -> tuple[list[float], list[float]]:
     ok = [r for r in rows if r.get("status") == "scored" and math.isfinite(r.get("phi", math.nan))]
-    return [r["phi"] for r in ok if r["k"] == 0.0], [r["phi"] for r in ok if r["k"] == 100.0]
+    return [r["phi"] for r in ok if r["k"] == NORMAL_K], [r["phi"] for r in ok if r["k"] == SEVERE_K]
 
 
 def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict, args: argparse.Namespace,
@@ -113,7 +114,7 @@ def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict,
         runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
                         friction_static=physics["friction_static"], side=False, yaw_deg=mesh_yaw(n, args.yaw_sd),
                         calibration=args.calibration)
-                for n in names for s in SPEEDS for k in (0.0, 100.0)]
+                for n in names for s in SPEEDS for k in CLASS_K]
         return _evaluate(runs, spec, client, desc)
 
     cal_rows = rows_for(cal_names, args.meshes, "threshold (calibration set)")
@@ -161,7 +162,7 @@ def choose_line_cuts(cal_names: list[str], test_names: list[str], physics: dict,
 def _speed_effect(rows: list[dict]) -> dict:
     """Mean Φ per k at 100 and 130 FPM (the paper: every class lower at 130 FPM, k = 0 above all)."""
     out = {}
-    for k in (0.0, 100.0):
+    for k in CLASS_K:
         means = [np.mean([r["phi"] for r in rows if r["k"] == k and r["speed_fpm"] == s and r.get("status") == "scored"
                           and math.isfinite(r["phi"])] or [math.nan]) for s in SPEEDS]
         out[f"phi_k{k:g}"] = {f"{s:g}fpm": float(m) for s, m in zip(SPEEDS, means)}
@@ -310,12 +311,12 @@ def run_loo(spec: str, client, out: Path, yaw_sd: float = 0.0, calibration: str 
     mass = resolved_calibration(calibration).total_mass_kg
     runs = [RunSpec(n, k, s, lanes=3, mass=mass, side=False, yaw_deg=mesh_yaw(n, yaw_sd), calibration=calibration)
             for n in names
-            for s in (100.0, 130.0) for k in (evaluation.NORMAL_K, evaluation.SEVERE_K)]
+            for s in SPEEDS for k in CLASS_K]
     rows = _evaluate(runs, spec, client, f"leave-one-out ({len(names)} reference meshes)")
     units = evaluation.run_units(rows)
     report: dict = {"meshes": names, "mass": mass, "yaw_sd_deg": yaw_sd, "speeds": {}}
     lines = [f"# Leave-one-out over {len(names)} reference meshes (M = {mass:g} kg, yaw sd {yaw_sd:g} deg)\n"]
-    for speed in (100.0, 130.0):
+    for speed in SPEEDS:
         folds = evaluation.leave_one_out([u for u in units if u.speed_fpm == speed])
         total = evaluation.pooled(folds)
         report["speeds"][f"{speed:g}"] = {

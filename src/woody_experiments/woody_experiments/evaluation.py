@@ -20,10 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from woody_common.line import NORMAL_K, SEVERE_K
 from woody_experiments.paper_targets import ACCURACY_MIN
 from woody_experiments.statistics import accuracy, best_threshold, wilson_interval
 
-NORMAL_K, SEVERE_K = 0.0, 100.0
 SET_REFERENCE = "reference"
 SET_GENERATED = "generated"
 
@@ -66,7 +66,7 @@ def split(units: Sequence[Unit]) -> tuple[list[float], list[float]]:
 
 @dataclass(frozen=True)
 class Score:
-    """Accuracy of 'woody if Φ < threshold' on a set of units."""
+    """Accuracy of the reject rule at a threshold (statistics.accuracy) on a set of units."""
 
     right: int
     total: int

@@ -25,13 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from woody_common.line import NORMAL_K, SEVERE_K
 from woody_experiments.statistics import roc
 from woody_vision.grading import Cut, FilletConditions, GradingRules, covariates
 from woody_vision.shape_score import LEADING_BLUNT
 
-NORMAL_K = 0.0
-SEVERE_K = 100.0
-"""The paper's two classes: the reject decision is fitted and scored on them."""
 SEVERE_GRADE_MIN_K = 40.0
 """Stiffness from which a fillet grades severe; below it (and above 0) moderate."""
 GRADE_NORMAL, GRADE_MODERATE, GRADE_SEVERE = "normal", "moderate", "severe"

@@ -13,7 +13,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from woody_common.line import FPM_TO_MPS
+from woody_common.line import mps_to_fpm
 from woody_experiments.line_grade import GRADES, true_grade
 
 VERDICT_COLUMNS = [
@@ -124,7 +124,7 @@ def _row(spawn: Spawn | None, verdict: Verdict | None, woody_k: float) -> dict:
     row = {column: "" for column in VERDICT_COLUMNS}
     if spawn is not None:
         row.update(sim_id=spawn.sim_id, lane=spawn.lane, mesh=spawn.mesh, k=spawn.k, mass=spawn.mass,
-                   speed_fpm=round(spawn.line_speed / FPM_TO_MPS, 3), spawn_time=round(spawn.stamp, 4),
+                   speed_fpm=round(mps_to_fpm(spawn.line_speed), 3), spawn_time=round(spawn.stamp, 4),
                    truth=truth_of(spawn.k, woody_k), true_grade=true_grade(spawn.k))
     if verdict is None:
         row.update(fillet_id="", phi=nan, hu_term=nan, solidity_term=nan, nmdm=nan, mdm=nan, be=nan, threshold=nan,

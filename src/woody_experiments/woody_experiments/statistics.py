@@ -1,7 +1,8 @@
 """The statistics of the experiments: finite values, mean ± sd, the Φ rule's accuracy, ROC, best threshold, Wilson.
 
-Normal (k = 0) fillets against severe (k = 100) ones under 'woody if Φ < threshold'
-(positive = severe); every function drops non-finite values first.
+Normal (k = 0) fillets against severe (k = 100) ones under the grader's reject rule,
+woody where Φ is strictly below the threshold (woody_vision.grading.is_woody_array;
+positive = severe); every function drops non-finite values first.
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+
+from woody_vision.grading import is_woody_array
 
 Z95 = 1.959963984540054
 """Two-sided 95 % standard normal quantile."""
@@ -28,13 +31,14 @@ def mean_sd(values) -> tuple[float, float, int]:
 
 
 def roc(normal: Sequence[float], severe: Sequence[float]) -> tuple[np.ndarray, np.ndarray, float]:
-    """ROC of 'woody if Φ < t' (positive = severe): (false-positive rates, true-positive rates, AUC)."""
+    """ROC of the reject rule over every cut t (positive = severe): (false-positive rates, true-positive rates,
+    AUC)."""
     n, s = finite(normal), finite(severe)
     if n.size == 0 or s.size == 0:
         return np.array([0.0, 1.0]), np.array([0.0, 1.0]), math.nan
     thresholds = np.concatenate([[-np.inf], np.unique(np.concatenate([n, s])), [np.inf]])
-    tpr = np.array([(s < t).mean() for t in thresholds] + [1.0])
-    fpr = np.array([(n < t).mean() for t in thresholds] + [1.0])
+    tpr = np.array([is_woody_array(s, t).mean() for t in thresholds] + [1.0])
+    fpr = np.array([is_woody_array(n, t).mean() for t in thresholds] + [1.0])
     # AUC = P(Φ_normal > Φ_severe) + 0.5 P(tie)
     greater = (n[:, None] > s[None, :]).mean()
     ties = (n[:, None] == s[None, :]).mean()
@@ -42,9 +46,9 @@ def roc(normal: Sequence[float], severe: Sequence[float]) -> tuple[np.ndarray, n
 
 
 def accuracy(normal: Sequence[float], severe: Sequence[float], threshold: float) -> tuple[float, int, int]:
-    """Fraction right with 'woody if Φ < threshold'; returns (accuracy, right, total)."""
+    """Fraction right under the reject rule at ``threshold``; returns (accuracy, right, total)."""
     n, s = finite(normal), finite(severe)
-    right = int((n >= threshold).sum() + (s < threshold).sum())
+    right = int((~is_woody_array(n, threshold)).sum() + is_woody_array(s, threshold).sum())
     total = int(n.size + s.size)
     return (right / total if total else math.nan), right, total
 
@@ -53,7 +57,7 @@ def balanced_accuracy(normal, severe, threshold: float) -> float:
     n, s = finite(normal), finite(severe)
     if n.size == 0 or s.size == 0:
         return math.nan
-    return 0.5 * ((n >= threshold).mean() + (s < threshold).mean())
+    return 0.5 * ((~is_woody_array(n, threshold)).mean() + is_woody_array(s, threshold).mean())
 
 
 def best_threshold(normal: Sequence[float], severe: Sequence[float]) -> tuple[float, float]:

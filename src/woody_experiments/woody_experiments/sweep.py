@@ -19,6 +19,7 @@ import math
 import os
 from pathlib import Path
 
+from woody_common.line import PAPER_SPEEDS_FPM
 from woody_experiments.conditions import TIDY
 from woody_experiments.experiment import RUN_COLUMNS, RunSpec, evaluate_run
 from woody_experiments.traces import run_file
@@ -29,7 +30,7 @@ TOP_K = (0.0, 20.0, 40.0, 60.0, 80.0, 100.0)
 SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
 """Paper, side view (Table sv_results)."""
 DEFAULT_K = tuple(sorted(set(TOP_K) | set(SIDE_K)))
-DEFAULT_SPEEDS = (100.0, 130.0)
+DEFAULT_SPEEDS = PAPER_SPEEDS_FPM
 META_FILE = "sweep_meta.json"
 CSV_FILE = "runs.csv"
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from woody_common.calibration import Calibration, resolved_calibration
+from woody_common.line import NORMAL_K, PAPER_SPEEDS_FPM, SEVERE_K
 from woody_experiments import evaluation, line_grade
 from woody_experiments.conditions import TIDY
 from woody_experiments.paper_targets import (
@@ -42,7 +43,6 @@ from woody_vision.grader_core import calibrated_rules
 
 FULL_GRID_EVALS = 1000 * 6 * 2 * 3
 GOAL_EVALS_PER_MIN = 150.0
-NORMAL_K, SEVERE_K = 0.0, 100.0
 
 PLOTS = ("phi_vs_k.png", "nmdm_vs_k.png", "phi_per_lane.png", "roc.png")
 
@@ -80,7 +80,7 @@ def _plot_beside_paper(ax, rows: Sequence[dict], speed: float, ks: Sequence[floa
 def physics_checks(rows: list[dict], side_rows: list[dict]) -> list[tuple[str, bool | None, str]]:
     """The physics calibration's targets: k = 0 speed effects, BE falling with k, the spread of Φ per class."""
     checks = []
-    n = {s: mean_sd(_select(side_rows, s, 0.0, column="nmdm"))[0] for s in (100.0, 130.0)}
+    n = {s: mean_sd(_select(side_rows, s, 0.0, column="nmdm"))[0] for s in PAPER_SPEEDS_FPM}
     if all(math.isfinite(v) for v in n.values()):
         checks.append((f"side: NMDM(k=0) at 130 FPM ≥ {SPEED_GAIN_MIN} above 100 FPM",
                        n[130.0] - n[100.0] >= SPEED_GAIN_MIN,
@@ -91,7 +91,7 @@ def physics_checks(rows: list[dict], side_rows: list[dict]) -> list[tuple[str, b
         checks.append(("side 100 FPM: BE falls monotonically with k",
                        all(b < a for (_, a), (_, b) in zip(be, be[1:])),
                        ", ".join(f"k={k:g}: {v:.1f}" for k, v in be) + " (paper k=0 37.6, k=100 19.3)"))
-    phi = {s: mean_sd(_select(rows, s, 0.0))[0] for s in (100.0, 130.0)}
+    phi = {s: mean_sd(_select(rows, s, 0.0))[0] for s in PAPER_SPEEDS_FPM}
     if all(math.isfinite(v) for v in phi.values()):
         drop = 1.0 - phi[130.0] / phi[100.0]
         checks.append((f"top: Φ(k=0) at 130 FPM ≥ {PHI_SPEED_DROP_MIN:.0%} below 100 FPM", drop >= PHI_SPEED_DROP_MIN,

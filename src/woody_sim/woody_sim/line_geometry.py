@@ -24,7 +24,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from woody_common.line import BELT_MARGIN_M, LANE_PITCH_M, LANES, TOP_CAMERA_HEIGHT_M, TOP_EDGE_OFFSET_M
+from woody_common.line import (
+    BELT_MARGIN_M,
+    LANE_PITCH_M,
+    LANES,
+    MAX_LANES,
+    ROLLER_RADIUS_M,
+    TOP_CAMERA_HEIGHT_M,
+    TOP_EDGE_OFFSET_M,
+)
 
 TOP_CAMERA_PRESETS: dict[str, dict[str, float | int]] = {
     "default": {},
@@ -83,7 +91,7 @@ class LineGeometry:
 
     lanes: int = LANES
     lane_pitch: float = LANE_PITCH_M
-    roller_radius: float = 0.0207
+    roller_radius: float = ROLLER_RADIUS_M
     """The seed system's end roller: 48 px at its side camera's 0.431 mm/px."""
     belt_length: float = 1.4
     belt_margin: float = BELT_MARGIN_M
@@ -117,8 +125,8 @@ class LineGeometry:
     extra: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
-        if not 1 <= self.lanes <= 6:
-            raise ValueError(f"lanes must be 1..6, got {self.lanes}")
+        if not 1 <= self.lanes <= MAX_LANES:
+            raise ValueError(f"lanes must be 1..{MAX_LANES}, got {self.lanes}")
 
     @property
     def belt_width(self) -> float:

@@ -33,14 +33,17 @@ from woody_common import topics
 from woody_common.images import image_message
 from woody_common.line import (
     BELT_MARGIN_M,
+    CLASS_K,
     LANE_PITCH_M,
     LANES,
     MAX_BELT_WIDTH_M,
+    MAX_LANES,
     MAX_SIDE_RATE_HZ,
     MAX_SPAWN_DURATION_S,
     MAX_SPAWN_SPACING_M,
     MIN_LANE_PITCH_M,
     MIN_SPAWN_SPACING_M,
+    REFERENCE_SPEED_FPM,
     SPEED_RANGE_FPM,
     check_lane_pitch,
     fpm_to_mps,
@@ -102,10 +105,10 @@ class LineSim(Node):
 
     def _declare_parameters(self) -> SimpleNamespace:
         """Declare and check every parameter; the node's own settings become attributes, the rest is returned."""
-        lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, 6)
-        speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
-                            "commercial line speeds).", *SPEED_RANGE_FPM)
-        self.k_values = [float(k) for k in declare(self, "k_values", [0.0, 100.0],
+        lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
+        speed_fpm = declare(self, "line_speed_fpm", REFERENCE_SPEED_FPM, "Belt speed in feet per minute (100 "
+                            "and 130 are the commercial line speeds).", *SPEED_RANGE_FPM)
+        self.k_values = [float(k) for k in declare(self, "k_values", list(CLASS_K),
                                                    "Stiffness values (N*m/rad) drawn per spawned fillet.")]
         mesh_spec = declare(self, "meshes", "builtin",
                             "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
@@ -130,7 +133,8 @@ class LineSim(Node):
                             MAX_SIDE_RATE_HZ)
         side_idle = declare(self, "side_idle_rate_hz", 2.0, "Side frame rate while no fillet of the watched lane "
                             "is in its view (frames just after one leaves go at side_rate_hz).", 0.1, 400.0)
-        side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
+        side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1,
+                            MAX_LANES - 1)
         top_camera = declare(self, "top_camera", "default", "Top camera geometry preset: default (672x376 at "
                              "0.75 m) or paper (the seed system's 960x696, 86.6 deg, 0.33 m).")
         self.realtime = declare(self, "realtime", False, "Pace the simulation to the wall clock.")

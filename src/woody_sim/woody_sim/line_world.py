@@ -54,14 +54,13 @@ import numpy as np
 import pybullet as p
 
 from woody_common.calibration import Calibration, resolved_calibration
+from woody_common.line import MAX_SPEED_MPS
 from woody_sim.belt_drive import belt_drive
 from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
 from woody_sim.hinge_law import chain_mass_matrix, hinge_state, implicit_hinge_torque
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.meshes import FilletMesh
 
-MAX_SPEED_MPS = 5.0
-"""Line speeds above this are rejected as a unit mistake (130 FPM is 0.66 m/s)."""
 MAX_MASS = 1000.0
 DEFAULT_DAMPING = 0.05
 """The seed's hinge damper in its side-view and combined scenes (the calibration may choose another)."""
@@ -613,7 +612,7 @@ def check_spawn(geometry: LineGeometry, k: float, lane: int, mass: float, speed_
 def _check_speed(speed_mps: float) -> float:
     speed = _check_positive_finite("speed", speed_mps)
     if speed > MAX_SPEED_MPS:
-        raise ValueError(f"speed must be at most {MAX_SPEED_MPS} m/s (is it in FPM?), got {speed}")
+        raise ValueError(f"speed must be at most {MAX_SPEED_MPS:.3f} m/s (is it in FPM?), got {speed}")
     return speed
 
 

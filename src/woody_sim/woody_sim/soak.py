@@ -28,7 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from woody_common.line import fpm_to_mps
+from woody_common.line import PAPER_SPEEDS_FPM, fpm_to_mps
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import FilletMesh
@@ -36,7 +36,7 @@ from woody_sim.meshes import FilletMesh
 SOAK_K = (0.0, 10.0, 20.0, 40.0, 100.0, 200.0, 400.0)
 SOAK_MASSES = (2.0, 10.0, 30.0, 100.0, 300.0)
 """kg: a decade either side of the calibrated masses (woody calibrate searches inside this range)."""
-SOAK_SPEEDS_FPM = (100.0, 130.0)
+SOAK_SPEEDS_FPM = PAPER_SPEEDS_FPM
 SOAK_LANES = (1, 3, 6)
 SOAK_WAVES = (1, 3)
 SPAWN_GAP_S = 0.25

@@ -32,6 +32,7 @@ from visualization_msgs.msg import ImageMarker
 from woody_common import topics
 from woody_common.line import (
     LANES,
+    MAX_LANES,
     SIDE_AXLE_PX,
     SIDE_ROLLER_RADIUS_PX,
     TOP_CAMERA_HEIGHT_M,
@@ -88,8 +89,9 @@ class Grader(Node):
             line_fraction=declare(self, "line_fraction", LINE_OVERHANG_FRACTION, "line_phi is Φ_t where the rigid "
                                   "overhang is this fraction of the body length.", 0.1, 0.9),
         )
-        lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, 6)
-        side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1, 5)
+        lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
+        side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1,
+                            MAX_LANES - 1)
         self.side_enabled = declare(self, "use_side_view", True, "Measure NMDM/MDM/BE on the watched lane.")
         self.side_wait = declare(self, "side_wait_s", DEFAULT_SIDE_WAIT_S,
                                  "Longest a watched-lane verdict waits for its side-view measurement (s).", 0.0, 10.0)

@@ -155,9 +155,9 @@ class GradingRules:
         return self.threshold if self.moderate_threshold is None else self.moderate_threshold
 
     def is_woody(self, score: float, conditions: FilletConditions = TIDY) -> bool:
-        """True when the score is strictly below the reject cut for these conditions."""
+        """True when the score is strictly below the reject cut for these conditions (:func:`is_woody_array`)."""
         _require_finite_score(score)
-        return score < self.threshold.at(conditions)
+        return bool(is_woody_array(score, self.threshold.at(conditions)))
 
     def grade(self, score: float, conditions: FilletConditions = TIDY) -> str | None:
         """Three-way grade of the score, or None without grade cuts."""
@@ -174,6 +174,13 @@ class GradingRules:
         """Reject label, optional grade and the reject cut applied."""
         return Classification(label=LABEL_WOODY if self.is_woody(score, conditions) else LABEL_NORMAL,
                               grade=self.grade(score, conditions), threshold=self.threshold.at(conditions))
+
+
+def is_woody_array(scores, threshold) -> np.ndarray:
+    """The reject rule, element-wise: woody where the score is strictly below the cut (stiff fillets deform
+    less, so they score lower). ``scores`` and ``threshold`` broadcast against each other (numpy); the one
+    place the rule is written, for a fillet (:meth:`GradingRules.is_woody`) and for the reports' arrays."""
+    return np.asarray(scores, dtype=float) < np.asarray(threshold, dtype=float)
 
 
 def _require_positive_finite(name: str, value: float) -> None:

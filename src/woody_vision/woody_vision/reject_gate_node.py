@@ -20,7 +20,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from woody_common import topics
-from woody_common.line import LANES, SPEED_RANGE_FPM, fpm_to_mps
+from woody_common.line import LANES, MAX_LANES, REFERENCE_SPEED_FPM, SPEED_RANGE_FPM, fpm_to_mps
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletVerdict, GateCommand
@@ -32,9 +32,9 @@ class RejectGate(Node):
 
     def __init__(self) -> None:
         super().__init__("reject_gate")
-        speed_fpm = declare(self, "line_speed_fpm", 100.0, "Belt speed in feet per minute (100 and 130 are the "
-                            "commercial speeds).", *SPEED_RANGE_FPM)
-        lanes = declare(self, "lanes", LANES, "Number of lanes, each with its own diverter.", 1, 6)
+        speed_fpm = declare(self, "line_speed_fpm", REFERENCE_SPEED_FPM, "Belt speed in feet per minute (100 "
+                            "and 130 are the commercial speeds).", *SPEED_RANGE_FPM)
+        lanes = declare(self, "lanes", LANES, "Number of lanes, each with its own diverter.", 1, MAX_LANES)
         distances = list(declare(self, "gate_distance_m", [0.6], "Distance from the roller edge to each lane's "
                                  "diverter (m): one value for all lanes or one per lane."))
         open_duration = declare(self, "open_duration_s", 0.3, "How long a diverter stays open (s).", 0.01, 5.0)

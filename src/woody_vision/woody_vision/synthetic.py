@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from woody_common.line import SIDE_ROLLER_RADIUS_PX, TOP_CAMERA_HEIGHT_M, TOP_EDGE_OFFSET_M
+from woody_common.line import REFERENCE_SPEED_MPS, SIDE_ROLLER_RADIUS_PX, TOP_CAMERA_HEIGHT_M, TOP_EDGE_OFFSET_M
 from woody_vision.camera_model import Intrinsics, edge_row, intrinsics_from_k
 
 TOP_WIDTH = 672
@@ -34,7 +34,7 @@ DEFAULT_TOP_K = (TOP_FX, 0.0, TOP_WIDTH / 2.0, 0.0, TOP_FX, TOP_HEIGHT / 2.0, 0.
 FLOOR_DROP_M = 0.60
 REMOVE_DROP_M = 0.35
 """A fillet entirely this far below the belt has fallen and is no longer drawn (as in the simulator)."""
-SPEED_100_FPM = 0.508
+SPEED_100_FPM = REFERENCE_SPEED_MPS
 SEGMENTS = 40
 MAX_BEND_RAD = 2.3
 

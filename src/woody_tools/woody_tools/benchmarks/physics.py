@@ -6,7 +6,7 @@ import math
 import time
 
 from woody_common.calibration import resolved_calibration
-from woody_common.line import fpm_to_mps
+from woody_common.line import REFERENCE_SPEED_FPM, fpm_to_mps
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config
 from woody_sim.meshes import generate_fillet
 
@@ -29,7 +29,7 @@ def benchmark_physics(
     world = LineWorld(config=config or calibrated_config(calibration))
     mass = calibration.total_mass_kg
     try:
-        speed = fpm_to_mps(100.0)
+        speed = fpm_to_mps(REFERENCE_SPEED_FPM)
         meshes = [generate_fillet(seed) for seed in range(3)]
         stiffness = (0.0, 100.0, 400.0)
         lanes = world.geometry.lanes

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from woody_common.line import REFERENCE_SPEED_FPM
 from woody_common.stamps import stamp_to_seconds
 from woody_sim.meshes import BUILTIN_DIR
 from woody_tools.processes import NodeProcess, entry_point, lease_domain
@@ -99,7 +100,7 @@ def bench_graph(fillets: int = 12) -> dict:
             "woody_run_startup_s": float(line.group(1)), "sweep_evals_per_min": float(rate.group(1))}
 
 
-def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = 100.0, side_rate_hz: float = 60.0,
+def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = REFERENCE_SPEED_FPM, side_rate_hz: float = 60.0,
                  physics_workers: int = 1) -> float:
     """Sim seconds per wall second of the real line_sim process (3 lanes, top 30 Hz, side ``side_rate_hz``;
     ``physics_workers=0`` keeps all its physics in its main process)."""

@@ -15,11 +15,14 @@ import sys
 
 from woody_common.calibration import ENV_VAR, resolve_calibration, resolved_calibration
 from woody_common.line import (
+    CLASS_K,
     LANE_PITCH_M,
+    MAX_LANES,
     MAX_SIDE_RATE_HZ,
     MAX_SPAWN_DURATION_S,
     MAX_SPAWN_SPACING_M,
     MIN_SPAWN_SPACING_M,
+    REFERENCE_SPEED_FPM,
     SPEED_RANGE_FPM,
     check_lane_pitch,
     fpm_to_mps,
@@ -47,13 +50,13 @@ PLACEMENT_OPTIONS = (  # (option, LineConditions field, lowest, highest, unit)
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lanes", type=int, default=3, help="lanes across the belt, 1-6 (default 3)")
-    parser.add_argument("--speed-fpm", type=float, default=100.0,
+    parser.add_argument("--speed-fpm", type=float, default=REFERENCE_SPEED_FPM,
                         help=f"line speed in feet per minute, anywhere in {SPEED_RANGE_FPM[0]:g}.."
                              f"{SPEED_RANGE_FPM[1]:g} (default 100; commercial lines run 90-140)")
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--fillets", type=int, default=None, help="total fillets to spawn (default 12)")
     group.add_argument("--duration", type=float, default=None, help="sim seconds of spawning instead of a count")
-    parser.add_argument("--k", type=float, nargs="+", default=[0.0, 100.0],
+    parser.add_argument("--k", type=float, nargs="+", default=list(CLASS_K),
                         help="stiffness values to mix, N*m/rad (default: 0 normal, 100 woody)")
     parser.add_argument("--meshes", default="builtin",
                         help="builtin, generated:N[:SEED], a folder of meshes; comma-combinable (default builtin)")
@@ -130,8 +133,8 @@ def _add_grading_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _validate(args: argparse.Namespace) -> None:
     low, high = SPEED_RANGE_FPM
-    if not 1 <= args.lanes <= 6:
-        raise RunRefused(f"--lanes must be 1..6, got {args.lanes}")
+    if not 1 <= args.lanes <= MAX_LANES:
+        raise RunRefused(f"--lanes must be 1..{MAX_LANES}, got {args.lanes}")
     if not low <= args.speed_fpm <= high:
         raise RunRefused(f"--speed-fpm must be in [{low:g}, {high:g}], got {args.speed_fpm}")
     if args.fillets is not None and args.fillets < 1:
