@@ -1,28 +1,8 @@
 """``woody replay BAG``: republish a bag's serialized messages with their recorded timing (`woody_bag.player`).
 
 `add_arguments` and `run` are the subcommand's whole interface (the ``woody`` CLI
-calls them). Behaviour:
-
-- Messages are published as the recorded CDR bytes (no decode), each on a
-  publisher of its recorded type, with the QoS its recorded publishers offered
-  (reliable unless they were all best-effort; transient-local when they all
-  were, e.g. ``/line/ground_truth``), keep-last 100.
-- Pacing: message *i* goes out at ``start + (log_time_i - log_time_0) / rate``
-  on the wall clock (``log_time`` = the recorder's wall-clock reception time).
-  A replayer that falls behind publishes at once and never skips.
-- ``/clock``: the recorded ``/clock`` messages are republished unchanged in
-  their place, so ``use_sim_time`` nodes see the sim times of the recording
-  (running ``rate`` times as fast). A bag without ``/clock`` gets one
-  synthesised from the log times (``--clock-rate`` Hz, plus once before every
-  message). ``--no-clock`` publishes none. ``--topics`` selects data topics
-  only; ``/clock`` follows ``--no-clock``.
-- Before playing it waits up to ``--wait-for-subscribers`` seconds until every
-  publisher has a subscriber, then ``--start-delay`` seconds more.
-- ``--loop`` starts over after the last message (sim time then jumps back).
-- Into a running graph: topics that live nodes already publish (found in the
-  first ``--discovery`` seconds) are skipped with one warning line, so the
-  graph's outputs are not doubled (``--keep-live`` plays them anyway);
-  ``--exclude`` drops topics by name; ``--namespace NS`` plays under NS.
+calls them). What is published, when, with which QoS and clock, and which topics
+are skipped in a running graph is the player's behaviour (:mod:`woody_bag.player`).
 
 Exit codes: 0 when the bag (or its readable part) was played or the replay was
 stopped by SIGINT/SIGTERM; 2 with one line on stderr, no traceback, when the
