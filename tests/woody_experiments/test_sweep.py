@@ -13,7 +13,7 @@ import pytest
 
 from woody_common.calibration import resolved_calibration, write_calibration
 from woody_experiments import statistics, sweep_report, traces
-from woody_experiments.experiment import RUN_COLUMNS
+from woody_experiments.runs_csv import RUN_COLUMNS
 
 MESHES = "generated:2:7"
 ARGS = ["sweep", "--meshes", MESHES, "--k", "0,100", "--speeds", "100", "--jobs", "2", "--traces"]
@@ -170,25 +170,3 @@ def test_threshold_and_roc_helpers():
     assert 9.0 < t < 15.0 and bacc == 1.0
     assert statistics.roc(normal, severe)[2] == 1.0
     assert statistics.accuracy(normal, severe, 8.0)[0] == pytest.approx(5 / 6)
-
-
-def test_runs_file_replaces_atomically(tmp_path, monkeypatch):
-    from woody_experiments import sweep
-
-    path = tmp_path / "runs.csv"
-    row = {"mesh": "m", "k": 0.0, "speed_fpm": 100.0, "lane": 0, "mass": 20.0, "phi": 1.5, "status": "scored"}
-    runs = sweep.RunsFile(path, [row])
-    runs.append([dict(row, lane=1)])
-    before = path.read_text()
-    assert len(_rows(path)) == 2
-
-    def interrupted(fd):  # Ctrl-C while the next batch is being written
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(sweep.os, "fsync", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        runs.append([dict(row, lane=2)])
-    assert path.read_text() == before  # the previous batch's file, whole
-    monkeypatch.undo()
-    done, _ = sweep.completed_runs(path, lanes=2)
-    assert done == {sweep.run_key("m", 0.0, 100.0, 20.0)}

@@ -44,6 +44,7 @@ import numpy as np
 from woody_common.calibration import resolved_calibration
 from woody_common.line import fpm_to_mps
 from woody_experiments.conditions import TIDY, run_placement
+from woody_experiments.runs_csv import RUN_COLUMNS  # noqa: F401 - the rows' columns, importable from here too
 from woody_sim.line_conditions import FilletPlacement, place_mesh
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config, seed_dynamic_friction
@@ -56,12 +57,6 @@ from woody_vision.grading import GradingRules
 from woody_vision.segmentation import REAL_CAMERA_FILTERS, BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.side_view import SidePassageTracker
 from woody_vision.tracking import CentroidTracker
-
-RUN_COLUMNS = ["mesh", "k", "speed_fpm", "condition", "lane", "mass", "yaw_deg", "blunt_first", "scale", "phi",
-               "hu_term", "solidity_term", "line_phi", "speed_mps", "leading_end", "turn_deg", "length_m", "rejected",
-               "nmdm", "mdm", "be", "status", "reason"]
-"""One row per lane: the run (mesh, k, speed, condition and how the fillet lay), the paper's Φ (NaN unless its
-window closed cleanly), the line score with what the grader measured, the side view, and the verdict's status."""
 
 SPAWN_X = -0.42
 """Sweeps spawn just inside the top camera's view (fillet centre, m): only the approach the scores need."""

@@ -13,15 +13,13 @@ rows, or without its trace when traces are asked for, is redone).
 
 from __future__ import annotations
 
-import csv
-import io
 import math
-import os
 from pathlib import Path
 
 from woody_common.line import PAPER_SPEEDS_FPM
 from woody_experiments.conditions import TIDY
-from woody_experiments.experiment import RUN_COLUMNS, RunSpec, evaluate_run
+from woody_experiments.experiment import RunSpec, evaluate_run
+from woody_experiments.runs_csv import FILE_NAME, RunsFile, read_runs
 from woody_experiments.traces import run_file
 from woody_sim.meshes import mesh_yaw
 
@@ -32,7 +30,7 @@ SIDE_K = (0.0, 10.0, 100.0, 200.0, 400.0)
 DEFAULT_K = tuple(sorted(set(TOP_K) | set(SIDE_K)))
 DEFAULT_SPEEDS = PAPER_SPEEDS_FPM
 META_FILE = "sweep_meta.json"
-CSV_FILE = "runs.csv"
+CSV_FILE = FILE_NAME
 
 
 def run_key(mesh: str, k: float, speed: float, mass: float, condition: str = TIDY) -> tuple:
@@ -40,69 +38,17 @@ def run_key(mesh: str, k: float, speed: float, mass: float, condition: str = TID
     return (mesh, round(float(k), 6), round(float(speed), 6), round(float(mass), 3), condition)
 
 
-def read_rows(path: Path) -> list[dict]:
-    if not path.exists():
-        return []
-    with path.open(newline="") as fh:
-        return list(csv.DictReader(fh))
-
-
-class RunsFile:
-    """``runs.csv``, written by the client only: every write replaces the whole file atomically.
-
-    The text is kept in memory and written to a temporary file that is
-    fsync'ed and renamed over the old one, so a Ctrl-C or a kill at any moment
-    leaves either the previous batch's file or the new one, never a torn row.
-    """
-
-    def __init__(self, path: Path, rows: list[dict]):
-        self.path = path
-        self._text = _csv_text(rows, header=True)
-        self._replace()
-
-    def append(self, rows: list[dict]) -> None:
-        self._text += _csv_text(rows, header=False)
-        self._replace()
-
-    def _replace(self) -> None:
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        with tmp.open("w", newline="") as fh:
-            fh.write(self._text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, self.path)
-
-
-def _csv_text(rows: list[dict], header: bool) -> str:
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=RUN_COLUMNS, extrasaction="ignore")
-    if header:
-        writer.writeheader()
-    for row in rows:
-        writer.writerow({c: _fmt(row.get(c, "")) for c in RUN_COLUMNS})
-    return buffer.getvalue()
-
-
-def _fmt(value) -> object:
-    if isinstance(value, float):
-        return "" if math.isnan(value) else f"{value:.6g}"
-    return value
-
-
 def completed_runs(path: Path, lanes: int, traced: Path | None = None) -> tuple[set[tuple], RunsFile]:
     """Keys of runs with all their lane rows in the CSV (and, with ``traced`` = the sweep folder, their trace
     file), and the file to append to without the other runs' rows (they are redone cleanly)."""
-    rows = read_rows(path)
     by_run: dict[tuple, list[dict]] = {}
-    for row in rows:
-        try:
-            condition = row.get("condition") or TIDY
-            mass = float(row["mass"]) / float(row.get("scale") or 1.0) ** 3
-            key = run_key(row["mesh"], float(row["k"]), float(row["speed_fpm"]), mass, condition)
-        except (KeyError, ValueError):
+    for row in read_runs(path):
+        scale = row["scale"] if math.isfinite(row["scale"]) else 1.0
+        if not all(math.isfinite(row[c]) for c in ("mass", "k", "speed_fpm")):
             continue
+        key = run_key(row["mesh"], row["k"], row["speed_fpm"], row["mass"] / scale ** 3, row["condition"] or TIDY)
         by_run.setdefault(key, []).append(row)
-    done = {key for key, rs in by_run.items() if {int(r["lane"]) for r in rs} >= set(range(lanes))}
+    done = {key for key, rs in by_run.items() if {r["lane"] for r in rs} >= set(range(lanes))}
     if traced is not None:
         done = {key for key in done if run_file(traced, *key).exists()}
     keep = [r for key, rs in by_run.items() if key in done for r in rs]

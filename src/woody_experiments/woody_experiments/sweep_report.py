@@ -9,7 +9,6 @@ the paper's full grid (1,000 meshes x 6 k x 2 speeds x 3 lanes).
 
 from __future__ import annotations
 
-import csv
 import math
 import shutil
 from collections.abc import Sequence
@@ -20,7 +19,7 @@ import numpy as np
 
 from woody_common.calibration import Calibration, resolved_calibration
 from woody_common.line import NORMAL_K, PAPER_SPEEDS_FPM, SEVERE_K
-from woody_experiments import evaluation, line_grade
+from woody_experiments import evaluation, line_grade, runs_csv
 from woody_experiments.conditions import TIDY
 from woody_experiments.paper_targets import (
     ACCURACY_MIN,
@@ -37,6 +36,7 @@ from woody_experiments.paper_targets import (
     PHYSICAL_DELTA_NMDM,
     SPEED_GAIN_MIN,
 )
+from woody_experiments.runs_csv import read_runs
 from woody_experiments.statistics import accuracy, best_threshold, finite, mean_sd, roc, wilson_interval
 from woody_sim.meshes import load_mesh_set
 from woody_vision.grader_core import calibrated_rules
@@ -45,24 +45,6 @@ FULL_GRID_EVALS = 1000 * 6 * 2 * 3
 GOAL_EVALS_PER_MIN = 150.0
 
 PLOTS = ("phi_vs_k.png", "nmdm_vs_k.png", "phi_per_lane.png", "roc.png")
-
-_FLOAT_COLUMNS = ("k", "speed_fpm", "mass", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be", "line_phi",
-                  "speed_mps", "turn_deg", "length_m", "yaw_deg", "scale", "blunt_first", "rejected")
-
-
-def load_rows(path: Path) -> list[dict]:
-    rows = []
-    with Path(path).open(newline="") as fh:
-        for row in csv.DictReader(fh):
-            for c in _FLOAT_COLUMNS:
-                try:
-                    row[c] = float(row[c]) if row.get(c, "") != "" else math.nan
-                except ValueError:
-                    row[c] = math.nan
-            row["lane"] = int(row["lane"])
-            rows.append(row)
-    return rows
-
 
 def _plot_beside_paper(ax, rows: Sequence[dict], speed: float, ks: Sequence[float], column: str,
                        paper: dict | None, color) -> None:
@@ -168,7 +150,7 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None,
     was fitted on); None = the resolved one (woody_common.calibration.resolve_calibration)."""
     out = Path(out)
     calibration = calibration or resolved_calibration()
-    rows = load_rows(out / "runs.csv")
+    rows = read_runs(out / runs_csv.FILE_NAME)
     grid = _grid([r for r in rows if (r.get("condition") or TIDY) == TIDY], calibration.phi_threshold,
                  str(calibration.provenance.get("calibration_meshes", "")))
     meta = meta or {}
@@ -449,7 +431,7 @@ def _write_docs(out: Path, docs: Path, text: str) -> None:
     """docs/results.md (keeping its hand-written discussion below the marker), docs/results/*.png and the
     raw docs/results/runs.csv the figures come from."""
     (docs / "results").mkdir(parents=True, exist_ok=True)
-    for name in (*PLOTS, "runs.csv"):
+    for name in (*PLOTS, runs_csv.FILE_NAME):
         if (out / name).exists():
             shutil.copy(out / name, docs / "results" / name)
     target = docs / "results.md"

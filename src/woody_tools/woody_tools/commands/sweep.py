@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from woody_common.calibration import ENV_VAR, resolve_calibration, resolved_calibration
-from woody_experiments import cluster, sweep, sweep_report, traces
+from woody_experiments import cluster, runs_csv, sweep, sweep_report, traces
 from woody_experiments.conditions import SWEEP_CONDITIONS, TIDY
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import DEFAULT_MESHES, load_meshes
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     mass = float(args.mass) if args.mass is not None else calibration.total_mass_kg
     names = list(meshes)
-    csv_path = out / sweep.CSV_FILE
+    csv_path = out / runs_csv.FILE_NAME
     mismatch = _folder_mismatch(out / sweep.META_FILE, args)
     if mismatch:
         print(f"woody sweep: {out} holds runs with {mismatch}", file=sys.stderr)
@@ -145,7 +145,7 @@ def _folder_mismatch(meta_path: Path, args: argparse.Namespace) -> str | None:
 
 
 def _evaluate_todo(args: argparse.Namespace, todo: list[RunSpec], meshes: dict,
-                   runs_file: sweep.RunsFile) -> cluster.Throughput | None:
+                   runs_file: runs_csv.RunsFile) -> cluster.Throughput | None:
     """Run the missing runs on the cluster; None (after one line on stderr) when the cluster cannot be reached."""
     if not todo:
         return cluster.Throughput()
