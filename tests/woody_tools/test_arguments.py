@@ -51,7 +51,7 @@ def _woody(*args: str) -> subprocess.CompletedProcess:
 
 @pytest.mark.parametrize("args, line", [
     (("sweep", "--yaw-sd", "-5"), "argument --yaw-sd: must be within 0..45 degrees, got -5"),
-    (("run", "--yaw-sd", "-5"), "argument --yaw-sd: must be within 0..45 degrees, got -5"),
+    (("run", "--yaw-sd", "-5"), "woody run: --yaw-sd must be within 0..45 deg, got -5"),  # a line_sim placement option
     (("calibrate", "--yaw-sd", "-5"), "argument --yaw-sd: must be within 0..45 degrees, got -5"),
     (("sweep", "--k", "0,-5"), "argument --k: every k must be a finite number >= 0, got -5"),
     (("sweep", "--speeds", "0"), "argument --speeds: every speed must be within 1..400 FPM, got 0"),
