@@ -21,6 +21,7 @@ from woody_vision.segmentation import (
     SegmentationParams,
     height_map,
     segment_depth,
+    segment_height_map,
     segment_mask,
 )
 from woody_vision.synthetic import (
@@ -388,3 +389,20 @@ def test_fillets_lying_side_by_side_along_their_length_are_split_by_height():
     depth, background, _ = render_flat([(0, yawed(big[0], 35.0), 0.0)])
     (whole,) = segment_depth(depth, background, wide)
     assert whole.bbox[2] > wide.split_width_px
+
+
+def test_fillets_side_by_side_reaching_past_the_roller_edge_are_split_by_their_middles_on_the_belt():
+    """Two domed fillets touching side by side whose fronts hang past the edge, where the background is the floor
+    and the height reads over half a metre: the split is seeded on the middles still lying on the belt."""
+    rows, cols = np.mgrid[0:200, 0:240]
+    height = np.zeros((200, 240), np.float32)
+    for centre in (90.0, 150.0):  # nearly rectangular outlines: no notch where they touch
+        across, along = (cols - centre) / 31.0, (rows - 90.0) / 70.0
+        inside = across ** 6 + along ** 6 < 1.0
+        height = np.maximum(height, np.where(inside, 0.004 + 0.022 * np.sqrt(np.clip(1.0 - across ** 2, 0, 1)), 0.0))
+    height[150:175, 60:120] = np.where(height[150:175, 60:120] > 0, 0.6, 0.0)  # a front over the floor
+    params = SegmentationParams(split_width_px=80.0)
+    assert len(segment_height_map(height, SegmentationParams())) == 1, "precondition: one solid blob"
+    blobs = segment_height_map(height, params)
+    assert len(blobs) == 2
+    assert sorted(round(b.centroid[0] / 10) for b in blobs) == [9, 15]

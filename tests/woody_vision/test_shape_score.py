@@ -411,3 +411,14 @@ def test_the_turn_from_the_flow_is_read_off_the_outline():
         rotation = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
         turned = polygon_contour((straight - centre) @ rotation.T + centre)
         assert turn_deg(turned) == pytest.approx(abs(degrees), abs=1.5)
+
+
+def test_frames_of_a_track_that_switched_to_the_neighbour_are_rejected():
+    """After a merge a track can follow the fillet in the next lane: its outline is clean but a width across."""
+    contours = translating(90, bend=drooping)
+    closes, plain, _ = run_evaluator(contours)
+    opens = round(plain.trace[0].stamp * FPS)
+    switched = [c + (70, 0) if i >= opens else c for i, c in enumerate(contours)]
+    _, result, _ = run_evaluator(switched)
+    assert result.status == STATUS_UNSCORED and result.rejected_frames >= 3
+    assert result.reason.startswith("no clean frames around the measuring point")

@@ -303,11 +303,17 @@ def _split_component(component: np.ndarray, height: np.ndarray,
     contour = _largest_contour(component)
     hull_area = cv2.contourArea(cv2.convexHull(contour))
     solid = hull_area <= 0.0 or cv2.contourArea(contour) / hull_area >= params.split_solidity
-    wide = 0.0 < params.split_width_px < cv2.boundingRect(contour)[2]
-    parts = None if solid else _split_by_distance(component, contour, params)
-    if parts is None and wide:
-        parts = _split_by_height(component, height, params)
-    return parts or [(component, contour)]
+    parts = (None if solid else _split_by_distance(component, contour, params)) or [(component, contour)]
+    return [piece for part in parts for piece in _split_if_wide(part, height, params)]
+
+
+def _split_if_wide(part: tuple[np.ndarray, np.ndarray | None], height: np.ndarray,
+                   params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """The part, or the fillets side by side in it when it is wider than one fillet can be."""
+    mask = part[0]
+    if not 0.0 < params.split_width_px < cv2.boundingRect(mask)[2]:
+        return [part]
+    return _split_by_height(mask, height, params) or [part]
 
 
 def _split_by_distance(component: np.ndarray, contour: np.ndarray,
@@ -327,8 +333,13 @@ def _split_by_distance(component: np.ndarray, contour: np.ndarray,
 
 def _split_by_height(component: np.ndarray, height: np.ndarray,
                      params: SegmentationParams) -> list[tuple[np.ndarray, None]] | None:
-    """A wide component split into the fillets around its thick cores (height watershed), or None if it has one."""
-    relief = cv2.bitwise_and(np.asarray(height, np.float32), np.asarray(height, np.float32), mask=component)
+    """A wide component split into the fillets around its thick cores (height watershed), or None if it has one.
+
+    Pixels higher than a fillet lying on the belt can be (past the roller edge the background is the floor) are
+    left out of the relief: the cores are the middles of the fillets still on the belt.
+    """
+    relief = np.asarray(height, np.float32).copy()
+    relief[(component == 0) | (relief > MAX_LYING_HEIGHT_M)] = 0.0
     cores = cv2.compare(relief, params.height_core_ratio * float(relief.max()), cv2.CMP_GT)
     n_cores, markers, stats, _ = cv2.connectedComponentsWithStats(cores, connectivity=8, ltype=cv2.CV_32S)
     big = [c for c in range(1, n_cores) if stats[c, cv2.CC_STAT_AREA] * 8 >= params.min_area_px]
@@ -339,6 +350,8 @@ def _split_by_height(component: np.ndarray, height: np.ndarray,
     return [(np.where(labels == core, np.uint8(255), np.uint8(0)), None) for core in big]
 
 
+MAX_LYING_HEIGHT_M = 0.1
+"""No fillet lying on the belt is this thick; higher pixels are past the roller edge, over the floor."""
 NOTCH_DEPTH_RATIO = 0.1
 """A concavity counts as the notch between two touching fillets when it is this deep × sqrt(component area)."""
 FLOOD_LEVELS = 6

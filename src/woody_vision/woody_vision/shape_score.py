@@ -52,8 +52,10 @@ outline and the approach: the fillet's speed in the image, which end leads
 Crowded lanes. A window frame whose outline suddenly grows (area or width
 beyond ``MERGE_GROWTH`` × the reference's) or whose trailing edge jumps back
 is a blob merged with a neighbour (a follower touching the fillet as it tips,
-a fillet side by side in the next lane): it is rejected, never scored, and
-counted. If the frames left around the measuring point are too far apart,
+a fillet side by side in the next lane); one whose centroid has moved across
+the flow by more than ``LATERAL_JUMP_RATIO`` × the reference's width is
+another fillet's blob (a track that switched fillets after a merge). Either
+is rejected, never scored, and counted. If the frames left around the measuring point are too far apart,
 the fillet is unscored with the reason. The reference is likewise the latest
 flat outline not grown beyond ``MERGE_GROWTH`` × the median flat area.
 
@@ -93,6 +95,9 @@ LINE_OVERHANG_FRACTION = 0.5
 fillet's centroid crosses the edge, about at a blunt-first one's)."""
 MERGE_GROWTH = 1.25
 """A window frame whose outline area or width exceeds the reference's by this factor is a merged blob."""
+LATERAL_JUMP_RATIO = 0.4
+"""A window frame whose centroid lies this far across the flow (× the reference width) from the reference's
+belongs to another fillet: fillets move along the flow, and draping shifts the centroid far less."""
 TRAILING_JUMP_PX = 3
 """A window frame whose trailing edge lies this far behind the previous frame's belongs to a merged follower."""
 LEADING_NARROW = "narrow"
@@ -340,6 +345,7 @@ class ShapeEvaluator:
         self._reference_stamp: float | None = None
         self._reference_area = math.nan
         self._reference_width = math.nan
+        self._reference_column = math.nan
         self._trace: list[FrameScore] = []
         self._extra: list[FrameScore] = []
         self._contours: list[np.ndarray] = []
@@ -397,6 +403,7 @@ class ShapeEvaluator:
         self._reference = make_reference(points, self.tip_ratio)
         self._reference_contour = points
         self._reference_width = float(np.ptp(points[:, 0]) + 1)
+        self._reference_column = _centroid_column(points)
         self._flat = []
         return self._reference is not None
 
@@ -427,6 +434,9 @@ class ShapeEvaluator:
         if self._last_trailing is not None and trailing < self._last_trailing - TRAILING_JUMP_PX:
             return True
         width = float(np.ptp(points[:, 0]) + 1)
+        if self._reference is not None and (
+                abs(_centroid_column(points) - self._reference_column) > LATERAL_JUMP_RATIO * self._reference_width):
+            return True
         return (cv2.contourArea(points) > MERGE_GROWTH * self._reference_area
                 or width > MERGE_GROWTH * self._reference_width)
 
@@ -500,6 +510,12 @@ class ShapeEvaluator:
             extra_trace=tuple(self._extra),
             window_closed=self._closed,
         )
+
+
+def _centroid_column(points: np.ndarray) -> float:
+    """Image column of an outline's area centroid (its mean column if it has no area)."""
+    m = cv2.moments(points.reshape(-1, 1, 2))
+    return m["m10"] / m["m00"] if m["m00"] > 0.0 else float(points[:, 0].mean())
 
 
 def _bracket_gap(frames: list[FrameScore], fraction: float) -> float:
