@@ -419,6 +419,7 @@ def test_frames_of_a_track_that_switched_to_the_neighbour_are_rejected():
     closes, plain, _ = run_evaluator(contours)
     opens = round(plain.trace[0].stamp * FPS)
     switched = [c + (70, 0) if i >= opens else c for i, c in enumerate(contours)]
-    _, result, _ = run_evaluator(switched)
-    assert result.status == STATUS_UNSCORED and result.rejected_frames >= 3
-    assert result.reason.startswith("no clean frames around the measuring point")
+    _, result, evaluator = run_evaluator(switched)
+    assert result is None  # no clean frame closes the window: the fillet waits for its track to end
+    ended = evaluator.finish()
+    assert ended.status == STATUS_UNSCORED and ended.rejected_frames == len(switched) - opens
