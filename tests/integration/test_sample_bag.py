@@ -177,10 +177,10 @@ def test_outline_from_the_registered_colour_gives_the_same_classes(ros_node, ros
 def test_two_namespaced_lines_share_a_domain_without_crosstalk(ros_node, ros_domain, tmp_path):
     """The sample replayed into /line1 and /line2 at once: each line grades its own 3 fillets, nothing else.
 
-    /line2's grader calls everything woody (threshold 1000), so a verdict crossing over would show; a camera
+    /line2's grader calls everything woody (a reject cut of 1000), so a verdict crossing over would show; a camera
     frame crossing over would arrive twice and be logged out of order.
     """
-    lines = {"/line1": {}, "/line2": {"threshold": 1000.0}}
+    lines = {"/line1": {}, "/line2": {"line_threshold": [1000.0, 0.0, 0.0, 0.0, 0.0]}}
     root: list = []
     from woody_msgs.msg import FilletVerdict
 

@@ -151,7 +151,7 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None,
     out = Path(out)
     calibration = calibration or resolved_calibration()
     rows = read_runs(out / runs_csv.FILE_NAME)
-    grid = _grid([r for r in rows if (r.get("condition") or TIDY) == TIDY], calibration.phi_threshold,
+    grid = _grid(_paper_rows(rows), calibration.phi_threshold,
                  str(calibration.provenance.get("calibration_meshes", "")))
     meta = meta or {}
     _plots(grid.rows, out, grid.speeds, grid.ks, grid.lanes, grid.threshold)
@@ -370,14 +370,21 @@ def _classification(grid: _Grid) -> tuple[list[str], list]:
     return L, checks
 
 
+def _paper_rows(rows: list[dict]) -> list[dict]:
+    """The rows the paper's tables are about: the tidy line at the paper's speeds (any others only in the line
+    grade's section)."""
+    paper = [r for r in rows if (r.get("condition") or TIDY) == TIDY and r["speed_fpm"] in PAPER_SPEEDS_FPM]
+    return paper or [r for r in rows if (r.get("condition") or TIDY) == TIDY]
+
+
 def _line_grade(rows: list[dict], rules, provenance: dict) -> list[str]:
     """The line's grade (line_phi against the calibrated cuts) per condition and speed, one vote per run."""
     runs = line_grade.graded_runs(rows, rules)
     if not runs:
         return []
     L = ["## The line's grade on a messy line\n",
-         "The grade the line uses: `line_phi` against the calibrated cuts, which follow each fillet's measured speed "
-         "and leading end (`docs/shape-score.md`). Cuts fitted on "
+         "The grade the line uses: `line_phi` against the calibrated cuts, which follow each fillet's measured speed, "
+         "leading end, turn and length (`docs/shape-score.md`). Cuts fitted on "
          f"`{provenance.get('calibration_meshes', '?')}` (conditions {provenance.get('line_conditions', '?')}, "
          f"{provenance.get('line_speeds_fpm', '?')} FPM); every mesh here is disjoint from them. One vote per run "
          "(median over its lanes); normal k = 0 vs severe k = 100; three classes normal k = 0 / moderate "
