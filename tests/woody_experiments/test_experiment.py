@@ -105,3 +105,14 @@ def test_lane_copies_are_the_chain_shifted_across_the_belt_and_leave_with_it():
             np.testing.assert_array_equal(poses[render_id], shifted)
         lanes.remove()
         assert renderer.fillet_ids == [] and lanes.poses() == {}
+
+
+def test_a_run_can_change_the_belt_speed_and_lay_its_lanes_at_another_pitch():
+    mesh = load_mesh_set("builtin")[0][0]
+    (steady,) = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, lanes=1, side=False), mesh)
+    (faster,) = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, lanes=1, side=False, speed_change_fpm=130.0,
+                                     speed_change_at_s=0.0), mesh)
+    assert faster["status"] == "scored" and faster["speed_mps"] == pytest.approx(fpm_to_mps(130.0), rel=0.03)
+    assert steady["speed_mps"] == pytest.approx(fpm_to_mps(100.0), rel=0.03)
+    narrow = evaluate_run(RunSpec(mesh.name, 0.0, 100.0, lanes=3, side=False, lane_pitch_m=0.13), mesh)
+    assert [r["status"] for r in narrow] == ["scored"] * 3

@@ -227,8 +227,8 @@ def test_a_run_on_an_exported_domain_with_other_nodes_refuses(tmp_path):
     (["--fillets-per-minute", "250"], "--fillets-per-minute must be in (0, 203.2] at 100 FPM"),
     (["--speed-fpm", "130", "--fillets-per-minute", "250", "--speed-change", "100@5"],
      "--fillets-per-minute must be in (0, 203.2] at 100 FPM"),  # the rate must hold after the change too
-    (["--speed-change", "100"], "--speed-change must be FPM@SECONDS"),
-    (["--speed-change", "500@3"], "--speed-change must be FPM@SECONDS with FPM in [1, 400]"),
+    (["--speed-change", "100"], "--speed-change: expected FPM@SECONDS"),
+    (["--speed-change", "500@3"], "--speed-change: expected FPM@SECONDS with FPM in [1, 400]"),
     (["--score", "both"], "--score must be one of line|paper, got 'both'"),
     (["--threshold", "0"], "--threshold must be in (0, 1000], got 0"),
 ])

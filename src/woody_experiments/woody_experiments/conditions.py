@@ -5,9 +5,8 @@ preset's numbers are defined once (``woody_sim.line_conditions.LINE_PRESETS``)
 and each single disturbance takes its own from there. A run's placement is
 drawn from its mesh, condition and speed (:func:`run_placement`), so the
 normal and woody versions of a mesh lie the same way (paired runs), and a
-rerun lies the same way. The lateral offset within the lane is left out of
-sweeps: a sweep's lanes are copies of one chain, and an offset only moves the
-fillet in the camera's perspective; the live line (``line_sim``) has it.
+rerun lies the same way. A sweep's lanes are copies of one chain, so a lateral
+offset moves every lane's copy alike.
 """
 
 from __future__ import annotations
@@ -38,6 +37,5 @@ def sweep_condition(name: str) -> LineConditions:
 
 def run_placement(mesh: str, condition: str, speed_fpm: float) -> FilletPlacement:
     """How a run's fillet lies: drawn from the mesh, the condition and the speed (the same at every k)."""
-    conditions = sweep_condition(condition)
-    placement = placement_for(conditions, zlib.crc32(f"{mesh}|{condition}".encode()), round(speed_fpm * 10))
-    return FilletPlacement(placement.yaw_deg, placement.blunt_first, 0.0, placement.scale)
+    return placement_for(sweep_condition(condition), zlib.crc32(f"{mesh}|{condition}".encode()),
+                         round(speed_fpm * 10))

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from woody_common.calibration import resolved_calibration
-from woody_common.line import fpm_to_mps
+from woody_common.line import LANE_PITCH_M, fpm_to_mps
 from woody_experiments.conditions import TIDY, run_placement
 from woody_experiments.runs_csv import RUN_COLUMNS  # noqa: F401 - the rows' columns, importable from here too
 from woody_sim.line_conditions import FilletPlacement, place_mesh
@@ -105,6 +105,11 @@ class RunSpec:
     calibration: str | None = None
     """The calibration file the run's physics and cuts come from (a path, so a worker process reads the same
     file); None = the resolved one (woody_common.calibration.resolve_calibration)."""
+    lane_pitch_m: float = LANE_PITCH_M
+    """Distance between lane centres (m): the lanes' copies lie this far apart, seen in perspective."""
+    speed_change_fpm: float = 0.0
+    """A belt speed change during the run (FPM; 0 = none), at ``speed_change_at_s`` of sim time."""
+    speed_change_at_s: float = 0.0
 
     def physics_overrides(self) -> dict:
         """PhysicsConfig fields this run sets itself (the rest come from the calibration)."""
@@ -145,7 +150,8 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     ``top_start_x=None`` renders top frames from the start; ``stats`` (if given)
     receives frame counts.
     """
-    geometry = LineGeometry(lanes=spec.lanes, spawn_x=SPAWN_X, **top_camera_preset(spec.top_camera))
+    geometry = LineGeometry(lanes=spec.lanes, lane_pitch=spec.lane_pitch_m, spawn_x=SPAWN_X,
+                            **top_camera_preset(spec.top_camera))
     placement = spec.placement
     mesh = place_mesh(mesh, placement)
     renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side)
@@ -158,7 +164,11 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     try:
         top = _TopView(spec, geometry, top_bg, calibrated_rules(calibration)) if spec.top else None
         lanes = _LaneCopies(world, renderer, geometry, world.spawn(mesh, k=spec.k, lane=geometry.watched_lane,
-                                                                   mass=mass, speed_mps=speed))
+                                                                   mass=mass, speed_mps=speed,
+                                                                   lateral_offset=placement.lateral_offset_m))
+        if spec.speed_change_fpm:
+            world.change_speed(fpm_to_mps(spec.speed_change_fpm), spec.speed_change_at_s)
+            top_start_x = None  # the fillet's position is no longer speed x time: frames from the start
         watched_fid = lanes.fillet_id
         side = _SideView(geometry, side_bg, side_rate_hz, watched_fid) if spec.side else None
         model = world.model(watched_fid)

@@ -69,12 +69,14 @@ def run_rows(run: RunSpec, mesh) -> list[dict]:
 
 def plan(mesh_names: list[str], ks: list[float], speeds: list[float], lanes: int, mass: float,
          side: bool = True, top_camera: str = "default", sensor: str = "ideal", yaw_sd: float = 0.0,
-         conditions: tuple[str, ...] = (TIDY,), calibration: str | None = None) -> list[RunSpec]:
+         conditions: tuple[str, ...] = (TIDY,), calibration: str | None = None, line: dict | None = None
+         ) -> list[RunSpec]:
     """Runs ordered so that partial results already span the grid (k, speed and condition vary fastest).
 
-    The side view is measured on the tidy line only: the paper's side-view tables are about it.
+    The side view is measured on the tidy line only: the paper's side-view tables are about it. ``line``
+    sets RunSpec's lane pitch and speed change for every run.
     """
     return [RunSpec(name, float(k), float(speed), lanes=lanes, mass=float(mass), side=side and condition == TIDY,
                     top_camera=top_camera, sensor=sensor, yaw_deg=mesh_yaw(name, yaw_sd), condition=condition,
-                    calibration=calibration)
+                    calibration=calibration, **(line or {}))
             for name in mesh_names for condition in conditions for speed in speeds for k in ks]

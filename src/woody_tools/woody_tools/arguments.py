@@ -6,7 +6,7 @@ import argparse
 import math
 from collections.abc import Callable
 
-from woody_common.line import SPEED_RANGE_FPM
+from woody_common.line import MAX_SPAWN_DURATION_S, SPEED_RANGE_FPM
 from woody_experiments.conditions import SWEEP_CONDITIONS
 from woody_sim.meshes import MAX_YAW_SD_DEG
 
@@ -63,3 +63,27 @@ def add_yaw_sd(parser: argparse.ArgumentParser, scope: str) -> None:
     parser.add_argument("--yaw-sd", type=YAW_SPREAD, default=0.0, metavar="DEG",
                         help="fillets lie turned on the belt: each mesh by DEG x a normal draw seeded by its name, "
                              f"the same at every k and speed (default 0: straight; {scope})")
+
+
+def speed_change(text: str) -> tuple[float, float]:
+    """``FPM@SECONDS`` (a belt speed change during a run) as (FPM, sim s); a ValueError says what is expected."""
+    low, high = SPEED_RANGE_FPM
+    try:
+        fpm, at = (float(part) for part in text.split("@"))
+    except ValueError:
+        fpm = at = math.nan
+    if not (low <= fpm <= high and 0.0 <= at <= MAX_SPAWN_DURATION_S):
+        raise ValueError(f"expected FPM@SECONDS with FPM in [{low:g}, {high:g}] and SECONDS in "
+                         f"[0, {MAX_SPAWN_DURATION_S:g}], got '{text}'")
+    return fpm, at
+
+
+def _speed_change_type(text: str) -> tuple[float, float]:
+    try:
+        return speed_change(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+SPEED_CHANGE = _speed_change_type
+"""An argparse type for ``--speed-change FPM@SECONDS``."""

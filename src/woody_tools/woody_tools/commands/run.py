@@ -32,7 +32,7 @@ from woody_sim.line_conditions import LINE_PRESETS, MAX_LATERAL_M, MAX_YAW_DEG, 
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
 from woody_sim.meshes import MAX_YAW_SD_DEG
 from woody_sim.sensor_model import PRESETS
-from woody_tools import line_run
+from woody_tools import arguments, line_run
 from woody_tools.line_run import RunRefused, describe_conditions
 from woody_vision.grader_core import SCORES
 
@@ -232,15 +232,10 @@ def _speed_change(text: str | None) -> tuple[float, float]:
     """``--speed-change FPM@SECONDS`` as (FPM, sim s); (0, 0) without one."""
     if text is None:
         return 0.0, 0.0
-    low, high = SPEED_RANGE_FPM
     try:
-        fpm, at = (float(part) for part in text.split("@"))
-    except ValueError:
-        fpm = at = float("nan")
-    if not (low <= fpm <= high and 0.0 <= at <= MAX_SPAWN_DURATION_S):
-        raise RunRefused(f"--speed-change must be FPM@SECONDS with FPM in [{low:g}, {high:g}] and SECONDS in "
-                         f"[0, {MAX_SPAWN_DURATION_S:g}], got '{text}'")
-    return fpm, at
+        return arguments.speed_change(text)
+    except ValueError as exc:
+        raise RunRefused(f"--speed-change: {exc}") from None
 
 
 def _validate_grading(args: argparse.Namespace) -> None:

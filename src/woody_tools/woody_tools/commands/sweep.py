@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 from woody_common.calibration import ENV_VAR, resolve_calibration, resolved_calibration
+from woody_common.line import LANE_PITCH_M, check_lane_pitch
 from woody_experiments import cluster, runs_csv, sweep, sweep_report, traces
 from woody_experiments.conditions import SWEEP_CONDITIONS, TIDY
 from woody_experiments.experiment import RunSpec
@@ -60,6 +61,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
                              "86.6 deg, 0.33 m); one camera per --out folder")
     arguments.add_yaw_sd(parser, "one setting per --out folder")
+    parser.add_argument("--lane-pitch", type=float, default=LANE_PITCH_M, metavar="M",
+                        help=f"distance between lane centres (default {LANE_PITCH_M:g} m; one setting per --out "
+                             "folder)")
+    parser.add_argument("--speed-change", type=arguments.SPEED_CHANGE, default=None, metavar="FPM@SECONDS",
+                        help="the belt changes to FPM at SECONDS of sim time in every run (one setting per --out "
+                             "folder)")
     parser.add_argument("--conditions", type=arguments.CONDITIONS, default=[TIDY],
                         help="how fillets lie, comma-separated: " + ", ".join(SWEEP_CONDITIONS) + " (default tidy; "
                              "docs/results.md, 'The messy line')")
@@ -77,6 +84,15 @@ def run(args: argparse.Namespace) -> int:
     if args.lanes < 1 or args.jobs < 1 or args.scaling_probe < 0:
         print("woody sweep: --lanes and --jobs must be >= 1, --scaling-probe >= 0", file=sys.stderr)
         return 2
+    try:
+        check_lane_pitch(args.lanes, args.lane_pitch)
+    except ValueError as exc:
+        print(f"woody sweep: --lane-pitch: {exc}", file=sys.stderr)
+        return 2
+    line = {"lane_pitch_m": args.lane_pitch}
+    if args.speed_change:
+        line.update(speed_change_fpm=args.speed_change[0], speed_change_at_s=args.speed_change[1])
+        args.speed_change = "{:g}@{:g}".format(*args.speed_change)  # as the folder's settings record it
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     try:
@@ -99,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     done, runs_file = sweep.completed_runs(csv_path, args.lanes, out if args.traces else None)
     runs = sweep.plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, top_camera=args.top_camera,
                       sensor=args.sensor, yaw_sd=args.yaw_sd, conditions=tuple(args.conditions),
-                      calibration=calibration_path)
+                      calibration=calibration_path, line=line)
     todo = [r for r in runs if sweep.run_key(r.mesh, r.k, r.speed_fpm, mass, r.condition) not in done]
     where = args.scheduler or f"a local Dask cluster of {min(args.jobs, max(1, len(todo)))} workers"
     print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds x "
@@ -126,7 +142,7 @@ def _report_traces(out: Path, threshold: float) -> None:
           f"{out / traces.TRACE_DIR}", file=sys.stderr)
 
 
-FOLDER_SETTINGS = {"top_camera": "default", "yaw_sd": 0.0}
+FOLDER_SETTINGS = {"top_camera": "default", "yaw_sd": 0.0, "lane_pitch": LANE_PITCH_M, "speed_change": None}
 """Settings all the runs in one --out folder share (runs.csv does not repeat them per row), with their defaults."""
 
 
@@ -178,7 +194,8 @@ def _update_meta(path: Path, stats: cluster.Throughput, args: argparse.Namespace
             "evaluations": stats.evaluations, "wall_s": round(stats.wall_s, 2), "jobs": stats.workers,
             "cores": os.cpu_count(), "scheduler": args.scheduler or "local", **stats.as_meta(),
             "meshes": args.meshes, "n_meshes": n_meshes, "mass": mass, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
-            "top_camera": args.top_camera, "yaw_sd": args.yaw_sd,
+            "top_camera": args.top_camera, "yaw_sd": args.yaw_sd, "lane_pitch": args.lane_pitch,
+            "speed_change": args.speed_change,
         })
     meta["evaluations"] = sum(i["evaluations"] for i in meta["invocations"])
     meta["wall_s"] = sum(i["wall_s"] for i in meta["invocations"])
@@ -206,4 +223,8 @@ def _argv(args: argparse.Namespace) -> list[str]:
         out += ["--yaw-sd", f"{args.yaw_sd:g}"]
     if args.conditions != [TIDY]:
         out += ["--conditions", ",".join(args.conditions)]
+    if args.lane_pitch != LANE_PITCH_M:
+        out += ["--lane-pitch", f"{args.lane_pitch:g}"]
+    if args.speed_change:
+        out += ["--speed-change", args.speed_change]
     return out
