@@ -41,6 +41,7 @@ from woody_common.line import (
 from woody_common.ros_params import calibrated_defaults, declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletTrackArray, FilletVerdict
+from woody_vision import side_view
 from woody_vision.camera_model import edge_row
 from woody_vision.frame_checks import FrameChecker, FrameError
 from woody_vision.grader_core import (
@@ -110,6 +111,7 @@ class Grader(Node):
         self.early_tracks: deque = deque(maxlen=EARLY_TRACKS)
         """Track messages received before the first camera_info, graded as soon as it arrives."""
         self.side = SidePassageTracker(**self.side_options) if self.side_enabled else None
+        side_view.warm_up()  # before any subscription: the first passage is measured whole, never while compiling
         self.side_checker = FrameChecker(self.get_logger())
         self.published = 0
         markers = declare(self, "publish_markers", True, "Publish grading/markers (visualization_msgs/ImageMarker: "

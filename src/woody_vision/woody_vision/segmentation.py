@@ -245,6 +245,15 @@ def fill_invalid(height: np.ndarray, valid: np.ndarray, radius_px: int) -> np.nd
     return np.where(valid, height, mean).astype(np.float32)
 
 
+def warm_up() -> None:
+    """Compile the segmentation's kernels (height map, watershed flood) or load them from numba's cache before the
+    first frame, so a node never falls behind its camera while it compiles."""
+    rows, cols = np.mgrid[0:40, 0:70]
+    discs = ((cols - 20) ** 2 + (rows - 20) ** 2 < 225) | ((cols - 46) ** 2 + (rows - 20) ** 2 < 225)
+    depth = np.where(discs, 0.98, 1.0).astype(np.float32)
+    segment_depth(depth, np.ones_like(depth), SegmentationParams(min_area_px=10, open_kernel_px=0))
+
+
 def segment_height_map(height: np.ndarray, params: SegmentationParams = SegmentationParams()) -> list[Blob]:
     """Split a height map into fillet blobs, sorted by centroid row then column."""
     mask = cv2.compare(height, params.height_threshold_m, cv2.CMP_GT) if height.size else None

@@ -29,6 +29,7 @@ from woody_common.line import LANE_PITCH_M, LANES, MAX_FILLET_WIDTH_M, MAX_LANES
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import stamp_to_seconds
 from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
+from woody_vision import segmentation
 from woody_vision.camera_model import LaneLayout
 from woody_vision.frame_checks import FrameChecker, FrameError
 from woody_vision.image_encodings import color_rgb, depth_metres, match_size
@@ -42,6 +43,7 @@ class Segmenter(Node):
 
     def __init__(self) -> None:
         super().__init__("segmenter")
+        segmentation.warm_up()  # before any subscription: no frame waits for a compile
         self.params = SegmentationParams(
             height_threshold_m=declare(self, "height_threshold_m", DEFAULT_HEIGHT_THRESHOLD_M, "Height above the "
                                        "belt background that counts as fillet (m).", 0.0005, 0.1),

@@ -129,6 +129,14 @@ def _zhang_suen_tables() -> tuple[np.ndarray, np.ndarray]:
 _ZS_TABLES = _zhang_suen_tables()
 
 
+def warm_up() -> None:
+    """Compile the side view's kernels (or load them from numba's cache) before the first frame: a node that
+    compiled on its first passage would miss frames of it and measure a partial passage."""
+    frame = np.zeros((8, 8, 3), np.uint8)
+    difference_mask(frame, frame, 30)
+    zhang_suen_thinning(np.ones((5, 5), np.uint8))
+
+
 def zhang_suen_thinning(mask: np.ndarray) -> np.ndarray:
     """One-pixel-wide skeleton (bool) of a binary mask, by Zhang–Suen thinning with a neighbourhood lookup."""
     img = np.pad((np.asarray(mask) > 0).astype(np.uint8), 1)
