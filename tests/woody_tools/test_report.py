@@ -45,3 +45,13 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, args, message):
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("woody report: ") and message in lines[0], lines
+
+
+def test_the_report_of_a_bag_has_one_picture_per_fillet_from_its_overlays(tmp_path):
+    result = report(str(SAMPLE / "line.mcap"), "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    fillets = (tmp_path / "verdicts.csv").read_text().splitlines()[1:]
+    pictures = sorted(p.name for p in (tmp_path / "fillets").glob("*.png"))
+    assert len(pictures) == len(fillets) == 3
+    text = (tmp_path / "report.md").read_text()
+    assert all(f"](fillets/{name})" in text for name in pictures)

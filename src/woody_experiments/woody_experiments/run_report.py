@@ -313,11 +313,12 @@ def _cell(value: object) -> str:
 
 
 def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody line run",
-                 run_info: dict | None = None, notes: Sequence[str] = ()) -> Path:
+                 run_info: dict | None = None, notes: Sequence[str] = (), extra: Sequence[str] = ()) -> Path:
     """Write report.md and its PNG plots into ``out_dir``; returns the report path.
 
     ``notes`` (mesh files skipped or converted, where a truncated bag ends) are listed at the
-    top, so nothing left out of the figures goes unsaid.
+    top, so nothing left out of the figures goes unsaid; ``extra`` Markdown lines (the fillet
+    pictures of woody_experiments.fillet_pictures) end the report.
     """
     import matplotlib
 
@@ -335,7 +336,7 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
     if run_info:
         lines += ["| setting | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in run_info.items()] + [""]
     lines += [f"- {note}" for note in notes] + ([""] if notes else [])
-    lines += _markdown_body(rows, scored, side, acc)
+    lines += _markdown_body(rows, scored, side, acc) + list(extra)
     path = out_dir / "report.md"
     path.write_text("\n".join(lines))
     return path

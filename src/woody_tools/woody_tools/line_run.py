@@ -22,6 +22,7 @@ from pathlib import Path
 from woody_common import topics
 from woody_common.line import fpm_to_mps, spacing_at_rate
 from woody_common.stamps import stamp_to_seconds
+from woody_experiments.fillet_pictures import write_fillet_pictures
 from woody_experiments.messages import spawn_from_msg, verdict_from_msg
 from woody_experiments.run_report import (
     MATCH_TOLERANCE_S,
@@ -405,7 +406,13 @@ def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, mon
     info = dict(run_settings(args, fillets))
     info.update({"fillets spawned": len(monitor.spawns), "verdicts": len(monitor.verdicts),
                  "gate commands": monitor.gate_commands, "sim time (s)": f"{monitor.sim_time:.1f}"})
-    report = build_report(rows, out, title="woody line run", run_info=info, notes=mesh_notes)
+    pictures, notes = [], list(mesh_notes)
+    if (out / "line.mcap").exists():
+        try:
+            pictures = write_fillet_pictures(out / "line.mcap", out)
+        except Exception as exc:  # a bag the recorder left cut short still gives the report, without pictures
+            notes.append(f"no fillet pictures: {exc}")
+    report = build_report(rows, out, title="woody line run", run_info=info, notes=notes, extra=pictures)
     print(verdict_table(rows))
     print(f"\nbag: {out / 'line.mcap'}\nverdicts: {csv_path}\nreport: {report}\nnode logs: {out / 'logs'}/")
     for line in mesh_notes:

@@ -148,6 +148,12 @@ class FilletGrader:
             self._lanes.pop(track_id, None)
         return decided + self.release(self.now)
 
+    def frame_phi(self, track_id: int, stamp: float) -> float:
+        """Φ_t of the track's frame at ``stamp`` (NaN when that frame was not scored): the overlays' label."""
+        evaluator = self._evaluators.get(track_id)
+        frame = evaluator.last_frame if evaluator is not None else None
+        return frame.phi if frame is not None and frame.stamp == stamp else math.nan
+
     def on_side(self, measurement: SideMeasurement) -> list[GradedFillet]:
         """Attach a finished side-view passage to the held verdict it overlaps; returns verdicts released."""
         self._side.append(measurement)

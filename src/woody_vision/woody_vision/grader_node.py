@@ -26,7 +26,7 @@ from geometry_msgs.msg import Point
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import ColorRGBA
+from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import ImageMarker
 
 from woody_common import topics
@@ -56,6 +56,7 @@ from woody_vision.grader_core import (
 from woody_vision.grading import Cut, FilletConditions, GradingRules
 from woody_vision.image_encodings import color_rgb
 from woody_vision.image_qos import declare_image_qos
+from woody_vision.overlays import FRAME, REFERENCE, Overlay, outline, verdict_overlays
 from woody_vision.shape_score import LINE_OVERHANG_FRACTION, TIP_WIDTH_RATIO, W1, W2
 from woody_vision.side_view import SidePassageTracker
 
@@ -64,6 +65,10 @@ MARKER_COLOURS = {"pending": ColorRGBA(r=1.0, g=0.85, b=0.0, a=1.0), "normal": C
 """Contour colours on the image: yellow until graded, then green normal, red woody, grey unscored."""
 MARKER_LIFETIME_NS = 200_000_000
 """A marker outlives its frame by a few frames, so a viewer never flickers, and vanishes with the fillet."""
+REFERENCE_COLOUR = ColorRGBA(g=0.8, b=1.0, a=1.0)
+"""The reference outline a verdict publishes (cyan); its measuring-point outline has the verdict's colour."""
+VERDICT_LIFETIME_S = 2
+"""The verdict's outlines stay this long (s), so a viewer can read them after the fillet fell."""
 LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY,
           "unscored": FilletVerdict.CLASS_UNSCORED}
 
@@ -115,7 +120,9 @@ class Grader(Node):
         self.side_checker = FrameChecker(self.get_logger())
         self.published = 0
         markers = declare(self, "publish_markers", True, "Publish grading/markers (visualization_msgs/ImageMarker: "
-                          "each track's contour on the top image, coloured by its verdict) for Foxglove.")
+                          "each track's contour on the top image, coloured by its verdict and labelled in ns with id, "
+                          "lane and Φ_t; at its verdict the reference outline and the outline at the measuring "
+                          "point, labelled with score and cut) for Foxglove and `woody report`.")
         self.labels: dict[int, str] = {}
 
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -175,8 +182,12 @@ class Grader(Node):
                   for t in msg.tracks if len(t.contour_uv) >= 6 and len(t.contour_uv) % 2 == 0]
         self._publish(self.core.on_tracks(stamp_to_seconds(msg.header.stamp), tracks, msg.ended_ids))
         if self.marker_pub is not None:
+            stamp = stamp_to_seconds(msg.header.stamp)
             for track in tracks:
-                self.marker_pub.publish(self._marker(msg.header, track))
+                label = self.labels.get(track.track_id, "pending")
+                overlay = Overlay(track.track_id, track.lane, label, FRAME, stamp, outline(track.contour),
+                                  phi=self.core.frame_phi(track.track_id, stamp))
+                self.marker_pub.publish(self._marker(msg.header, overlay))
 
     def on_side_image(self, msg: Image) -> None:
         try:
@@ -200,19 +211,24 @@ class Grader(Node):
         for fillet in graded:
             self.verdict_pub.publish(self.to_msg(fillet))
             self.published += 1
+            if self.marker_pub is not None:
+                for overlay in verdict_overlays(fillet):
+                    self.marker_pub.publish(self._marker(Header(frame_id=self.frame_id), overlay))
             self.labels[fillet.fillet_id] = fillet.label
             while len(self.labels) > 200:  # only fillets still in view are drawn
                 self.labels.pop(next(iter(self.labels)))
 
-    def _marker(self, header, track: TrackObservation) -> ImageMarker:
-        """The track's contour as an image annotation: ns says lane and verdict, id is the track id."""
-        label = self.labels.get(track.track_id, "pending")
-        outline = cv2.approxPolyDP(track.contour.reshape(-1, 1, 2), 1.0, True).reshape(-1, 2)
-        marker = ImageMarker(header=header, ns=f"lane{track.lane}/{label}", id=track.track_id,
-                             type=ImageMarker.POLYGON, action=ImageMarker.ADD, scale=2.0,
-                             outline_color=MARKER_COLOURS[label], filled=0)
-        marker.lifetime.nanosec = MARKER_LIFETIME_NS
-        marker.points = [Point(x=float(u), y=float(v)) for u, v in outline]
+    def _marker(self, header, overlay: Overlay) -> ImageMarker:
+        """One outline as an image annotation: ns is its label (woody_vision.overlays), id the track id."""
+        colour = REFERENCE_COLOUR if overlay.kind == REFERENCE else MARKER_COLOURS[overlay.label]
+        marker = ImageMarker(header=header, ns=overlay.ns, id=overlay.track_id, type=ImageMarker.POLYGON,
+                             action=ImageMarker.ADD, scale=2.0, outline_color=colour, filled=0)
+        if overlay.kind == FRAME:
+            marker.lifetime.nanosec = MARKER_LIFETIME_NS
+        else:
+            marker.header = Header(frame_id=header.frame_id, stamp=seconds_to_stamp(overlay.stamp))
+            marker.lifetime.sec = VERDICT_LIFETIME_S
+        marker.points = [Point(x=float(u), y=float(v)) for u, v in overlay.outline]
         return marker
 
     def to_msg(self, fillet: GradedFillet) -> FilletVerdict:

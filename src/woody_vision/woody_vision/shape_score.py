@@ -262,6 +262,8 @@ class ShapeResult:
     """The flat outline the reference was made from (for overlays)."""
     line_contour: np.ndarray | None = None
     """The outline of the frame nearest the measuring point (for overlays)."""
+    line_stamp: float | None = None
+    """Stamp of that frame."""
     extra_trace: tuple[FrameScore, ...] = ()
     """Frames scored after the window closed, up to the measuring point."""
     window_closed: bool = False
@@ -368,6 +370,12 @@ class ShapeEvaluator:
         return self._sightings
 
     @property
+    def last_frame(self) -> FrameScore | None:
+        """The latest scored frame (None before the window opens): the Φ_t an overlay shows."""
+        frames = self._extra or self._trace
+        return frames[-1] if frames else None
+
+    @property
     def referenced(self) -> bool:
         """True once the fillet was seen flat before the edge and its reference is locked."""
         return self._reference is not None
@@ -447,7 +455,7 @@ class ShapeEvaluator:
         if nearer is None or not math.isfinite(line_phi) or _bracket_gap(frames, self.line_fraction) > (
                 LATE_CLOSE_FRAMES * step):
             return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
-        return self._finish(STATUS_SCORED, "", line_phi, self._contours[nearer])
+        return self._finish(STATUS_SCORED, "", line_phi, self._contours[nearer], frames[nearer].stamp)
 
     def _advance_per_frame(self) -> float:
         """Rows the fillet moved per camera frame while flat (inf when too few frames tell)."""
@@ -484,7 +492,7 @@ class ShapeEvaluator:
         return FrameScore(stamp, self.w1 * hu_term + self.w2 * solidity_term, hu_term, solidity_term, overhang)
 
     def _finish(self, status: str, reason: str, line_phi: float = math.nan,
-                line_contour: np.ndarray | None = None) -> ShapeResult:
+                line_contour: np.ndarray | None = None, line_stamp: float | None = None) -> ShapeResult:
         self._phase = _Phase.DONE
         referenced = self._reference is not None
         return ShapeResult(
@@ -507,6 +515,7 @@ class ShapeEvaluator:
             rejected_frames=self._rejected,
             reference_contour=self._reference_contour,
             line_contour=line_contour,
+            line_stamp=line_stamp,
             extra_trace=tuple(self._extra),
             window_closed=self._closed,
         )

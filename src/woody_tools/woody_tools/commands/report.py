@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from woody_experiments.fillet_pictures import write_fillet_pictures
 from woody_experiments.messages import rows_from_bag, settings_from_bag
 from woody_experiments.run_report import build_report, read_csv, write_csv
 
@@ -23,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"woody report: {source}: no such file", file=sys.stderr)
         return 2
     out = Path(args.out) if args.out else source.parent
-    ended, settings = None, None
+    ended, settings, pictures = None, None, []
     try:
         if source.suffix == ".csv":
             rows = read_csv(source)
@@ -31,8 +32,11 @@ def run(args: argparse.Namespace) -> int:
             rows, ended = rows_from_bag(source, args.woody_k)
             settings = settings_from_bag(source, rows)
             write_csv(rows, out / "verdicts.csv")
+            if not ended:
+                pictures = write_fillet_pictures(source, out)
         notes = [f"the bag ends early: {ended}; this report covers its readable part"] if ended else []
-        report = build_report(rows, out, title=f"woody report of {source.name}", run_info=settings, notes=notes)
+        report = build_report(rows, out, title=f"woody report of {source.name}", run_info=settings, notes=notes,
+                              extra=pictures)
     except OSError as exc:
         print(f"woody report: {exc.filename or out}: {exc.strerror or exc}", file=sys.stderr)
         return 2
