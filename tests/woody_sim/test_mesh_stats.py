@@ -39,6 +39,7 @@ def test_rectangle_has_its_known_descriptors() -> None:
     assert d.area_m2 == pytest.approx(0.02, rel=0.01)
 
 
+@pytest.mark.slow  # 10 s: rasterises and meshes an ellipse at full resolution
 def test_ellipse_has_its_known_descriptors() -> None:
     d = describe(elliptic_slab(0.1, 0.05, 0.03))
     assert d.aspect_ratio == pytest.approx(2.0, rel=0.01)
@@ -83,6 +84,7 @@ def reference_summary() -> dict:
     return summarize([describe(load_mesh(BUILTIN_DIR / f"{name}.obj")) for name in BUILTIN_REFERENCE_NAMES])
 
 
+@pytest.mark.slow  # 12 s: generates and measures a mesh set
 def test_generated_set_means_fall_inside_the_reference_range(reference_summary: dict) -> None:
     generated = summarize([describe(generate_fillet(seed)) for seed in GENERATED_SEEDS])
     outside = outside_range(generated, reference_summary)
