@@ -147,9 +147,10 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                  stats: dict | None = None) -> list[dict]:
     """Simulate one run and return one row per lane (RUN_COLUMNS, and "trace": the lane's Φ window per frame).
 
-    ``top_start_x=None`` renders top frames from the start; ``stats`` (if given)
-    receives frame counts.
+    ``top_start_x=None`` renders top frames from the start, as does a run whose belt changes speed (the
+    fillet's position is then no longer speed × time); ``stats`` (if given) receives frame counts.
     """
+    top_start_x = None if spec.speed_change_fpm else top_start_x
     geometry = LineGeometry(lanes=spec.lanes, lane_pitch=spec.lane_pitch_m, spawn_x=SPAWN_X,
                             **top_camera_preset(spec.top_camera))
     placement = spec.placement
@@ -168,7 +169,6 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                                                                    lateral_offset=placement.lateral_offset_m))
         if spec.speed_change_fpm:
             world.change_speed(fpm_to_mps(spec.speed_change_fpm), spec.speed_change_at_s)
-            top_start_x = None  # the fillet's position is no longer speed x time: frames from the start
         watched_fid = lanes.fillet_id
         side = _SideView(geometry, side_bg, side_rate_hz, watched_fid) if spec.side else None
         model = world.model(watched_fid)

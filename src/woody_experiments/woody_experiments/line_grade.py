@@ -27,12 +27,21 @@ import numpy as np
 
 from woody_common.line import NORMAL_K, SEVERE_K
 from woody_experiments.statistics import roc
-from woody_vision.grading import Cut, FilletConditions, GradingRules, covariates
+from woody_vision.grading import (
+    GRADE_MODERATE,
+    GRADE_NORMAL,
+    GRADE_SEVERE,
+    LABEL_NORMAL,
+    LABEL_WOODY,
+    Cut,
+    FilletConditions,
+    GradingRules,
+    covariates,
+)
 from woody_vision.shape_score import LEADING_BLUNT
 
 SEVERE_GRADE_MIN_K = 40.0
 """Stiffness from which a fillet grades severe; below it (and above 0) moderate."""
-GRADE_NORMAL, GRADE_MODERATE, GRADE_SEVERE = "normal", "moderate", "severe"
 GRADES = (GRADE_NORMAL, GRADE_MODERATE, GRADE_SEVERE)
 
 
@@ -166,7 +175,7 @@ def summarise(runs: Sequence[GradedRun]) -> GradeSummary:
         key = (true_grade(r.k), r.grade)
         confusion[key] = confusion.get(key, 0) + 1
     return GradeSummary(
-        normal_right=sum(r.label == "normal" for r in normal), normal_total=len(normal),
-        severe_right=sum(r.label == "woody" for r in severe), severe_total=len(severe),
+        normal_right=sum(r.label == LABEL_NORMAL for r in normal), normal_total=len(normal),
+        severe_right=sum(r.label == LABEL_WOODY for r in severe), severe_total=len(severe),
         auc=roc([r.margin for r in normal], [r.margin for r in severe])[2], confusion=confusion,
         meshes=len({r.mesh for r in runs}))

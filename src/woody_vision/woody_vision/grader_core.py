@@ -80,6 +80,13 @@ SCORE_LINE = "line"
 SCORE_PAPER = "paper"
 SCORES = (SCORE_LINE, SCORE_PAPER)
 
+
+def check_score(score: str) -> str:
+    """``score`` if it names a score the grader can grade on; a ValueError otherwise."""
+    if score not in SCORES:
+        raise ValueError(f"score must be one of {', '.join(SCORES)}, got {score!r}")
+    return score
+
 MIN_SIGHTINGS = 3
 """Frames a track must be seen in before its end gives a verdict."""
 
@@ -107,8 +114,7 @@ class FilletGrader:
     """'line': grade ``line_phi`` (the default, robust to speed, direction and turn); 'paper': the paper's Φ."""
 
     def __post_init__(self) -> None:
-        if self.score not in SCORES:
-            raise ValueError(f"score must be one of {', '.join(SCORES)}, got {self.score!r}")
+        check_score(self.score)
         if self.side_wait_s < 0:
             raise ValueError(f"side_wait_s must be >= 0, got {self.side_wait_s}")
         ShapeEvaluator(self.edge_row, **self.evaluator_options)  # validate options now

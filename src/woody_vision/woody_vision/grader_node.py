@@ -48,10 +48,10 @@ from woody_vision.grader_core import (
     DEFAULT_SIDE_WAIT_S,
     SCORE_LINE,
     SCORE_PAPER,
-    SCORES,
     FilletGrader,
     GradedFillet,
     TrackObservation,
+    check_score,
 )
 from woody_vision.grading import Cut, FilletConditions, GradingRules
 from woody_vision.image_encodings import color_rgb
@@ -140,11 +140,10 @@ class Grader(Node):
     def _declare_rules(self) -> GradingRules:
         """Declare ``score``, the paper's threshold and the line's three cuts; the rules the score uses."""
         defaults = calibrated_defaults(self, "grader")
-        self.score = declare(self, "score", SCORE_LINE, "What the verdict grades: line (line_phi against cuts that "
-                             "follow the measured speed and leading end; robust on a messy line) or paper (the "
-                             "paper's Φ against the single threshold; no grade).")
-        if self.score not in SCORES:
-            raise ValueError(f"score must be one of {', '.join(SCORES)}, got {self.score!r}")
+        self.score = check_score(declare(self, "score", SCORE_LINE, "What the verdict grades: line (line_phi "
+                                         "against cuts that follow the measured speed and leading end; robust on a "
+                                         "messy line) or paper (the paper's Φ against the single threshold; no "
+                                         "grade)."))
         paper = declare(self, "threshold", defaults["threshold"], "With score paper: Φ below this is woody "
                         "(stiff fillets deform less); the default is the calibrated one.", 0.001, 1000.0)
         cuts = [Cut.of(declare(self, name, defaults[name], text)) for name, text in (

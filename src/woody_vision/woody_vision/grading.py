@@ -76,7 +76,7 @@ class Cut:
 
     def __post_init__(self) -> None:
         _require_positive_finite("cut base", self.base)
-        for name in ("speed_slope", "blunt_offset", "turn_slope", "length_slope"):
+        for name in CUT_TERMS[1:]:
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"cut {name} must be finite, got {getattr(self, name)}")
 

@@ -337,7 +337,7 @@ def _split_by_distance(component: np.ndarray, contour: np.ndarray,
             return None
         n_cores, markers = 3, halves
     labels = _flood(distance, markers, component)
-    return [(np.where(labels == core, np.uint8(255), np.uint8(0)), None) for core in range(1, n_cores)]
+    return _region_masks(labels, range(1, n_cores))
 
 
 def _split_by_height(component: np.ndarray, height: np.ndarray,
@@ -356,7 +356,12 @@ def _split_by_height(component: np.ndarray, height: np.ndarray,
         return None
     markers = np.where(np.isin(markers, big), markers, 0).astype(np.int32)
     labels = _flood(relief, markers, component)
-    return [(np.where(labels == core, np.uint8(255), np.uint8(0)), None) for core in big]
+    return _region_masks(labels, big)
+
+
+def _region_masks(labels: np.ndarray, regions) -> list[tuple[np.ndarray, None]]:
+    """One mask (255 inside) per watershed region, outlines still to be traced."""
+    return [(np.where(labels == region, np.uint8(255), np.uint8(0)), None) for region in regions]
 
 
 MAX_LYING_HEIGHT_M = 0.1

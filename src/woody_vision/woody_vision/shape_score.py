@@ -55,8 +55,8 @@ is a blob merged with a neighbour (a follower touching the fillet as it tips,
 a fillet side by side in the next lane); one whose centroid has moved across
 the flow by more than ``LATERAL_JUMP_RATIO`` × the reference's width is
 another fillet's blob (a track that switched fillets after a merge). Either
-is rejected, never scored, and counted. If the frames left around the measuring point are too far apart,
-the fillet is unscored with the reason. The reference is likewise the latest
+is rejected, never scored, and counted. If the frames left around the
+measuring point are too far apart, the fillet is unscored with the reason. The reference is likewise the latest
 flat outline not grown beyond ``MERGE_GROWTH`` × the median flat area.
 
 A result is produced exactly once per evaluator: 'scored' when the window
@@ -282,18 +282,20 @@ def leading_end(contour: np.ndarray) -> str:
     return LEADING_BLUNT if widths[-quarter:].mean() > widths[:quarter].mean() else LEADING_NARROW
 
 
-def interpolate_at(frames: list[FrameScore], fraction: float) -> tuple[float, int | None]:
-    """Φ_t at the overhang ``fraction`` between the two frames around it, and the index of the nearer one.
+def interpolate_at(frames: list[FrameScore], fraction: float) -> tuple[float, int | None, float]:
+    """Φ_t at the overhang ``fraction`` between the two frames around it, the index of the nearer one, and the
+    overhang between those two frames (how far apart they are).
 
-    (NaN, None) when no two consecutive frames bracket it.
+    (NaN, None, inf) when no two consecutive frames bracket it.
     """
     for i in range(1, len(frames)):
         before, after = frames[i - 1], frames[i]
         if before.overhang <= fraction <= after.overhang and after.overhang > before.overhang:
-            weight = (fraction - before.overhang) / (after.overhang - before.overhang)
+            gap = after.overhang - before.overhang
+            weight = (fraction - before.overhang) / gap
             nearer = i if weight >= 0.5 else i - 1
-            return before.phi + weight * (after.phi - before.phi), nearer
-    return math.nan, None
+            return before.phi + weight * (after.phi - before.phi), nearer, gap
+    return math.nan, None, math.inf
 
 
 def turn_deg(contour: np.ndarray) -> float:
@@ -441,19 +443,17 @@ class ShapeEvaluator:
         """Whether this window frame's blob has grown into a neighbour's (see the module doc)."""
         if self._last_trailing is not None and trailing < self._last_trailing - TRAILING_JUMP_PX:
             return True
-        width = float(np.ptp(points[:, 0]) + 1)
-        if self._reference is not None and (
-                abs(_centroid_column(points) - self._reference_column) > LATERAL_JUMP_RATIO * self._reference_width):
+        if abs(_centroid_column(points) - self._reference_column) > LATERAL_JUMP_RATIO * self._reference_width:
             return True
+        width = float(np.ptp(points[:, 0]) + 1)
         return (cv2.contourArea(points) > MERGE_GROWTH * self._reference_area
                 or width > MERGE_GROWTH * self._reference_width)
 
     def _finish_line(self) -> ShapeResult:
         frames = self._trace + self._extra
-        line_phi, nearer = interpolate_at(frames, self.line_fraction)
+        line_phi, nearer, gap = interpolate_at(frames, self.line_fraction)
         step = self._advance_per_frame() / self._reference.length_px
-        if nearer is None or not math.isfinite(line_phi) or _bracket_gap(frames, self.line_fraction) > (
-                LATE_CLOSE_FRAMES * step):
+        if nearer is None or not math.isfinite(line_phi) or gap > LATE_CLOSE_FRAMES * step:
             return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
         return self._finish(STATUS_SCORED, "", line_phi, self._contours[nearer], frames[nearer].stamp)
 
@@ -525,14 +525,6 @@ def _centroid_column(points: np.ndarray) -> float:
     """Image column of an outline's area centroid (its mean column if it has no area)."""
     m = cv2.moments(points.reshape(-1, 1, 2))
     return m["m10"] / m["m00"] if m["m00"] > 0.0 else float(points[:, 0].mean())
-
-
-def _bracket_gap(frames: list[FrameScore], fraction: float) -> float:
-    """Overhang between the two frames around ``fraction`` (inf when none bracket it)."""
-    for before, after in zip(frames, frames[1:]):
-        if before.overhang <= fraction <= after.overhang:
-            return after.overhang - before.overhang
-    return math.inf
 
 
 def _nanmax(values: list[float]) -> float:
