@@ -1,4 +1,5 @@
-"""SplitLineWorld: fillets in the worker move bit for bit as alone in a world; removals, errors and misuse."""
+"""SplitLineWorld: fillets in the workers move bit for bit as alone in a world; load balance, removals, errors and
+misuse."""
 
 from __future__ import annotations
 
@@ -35,22 +36,24 @@ def alone(mesh: FilletMesh, k: float, lane: int, spawn_step: int, steps: int) ->
 
 
 def test_each_fillet_moves_as_alone_in_a_world_whichever_process_simulates_it(meshes):
-    """The first spawn stays here, the second goes to the worker, which hears of it late; both tip over the
-    roller exactly as a lone chain would (a shared world would differ in round-off by millimetres)."""
+    """The first spawn goes to the worker, the second stays here (the worker has more fillets by then); the
+    worker hears of its spawn late, and both tip over the roller exactly as a lone chain would (a shared world
+    would differ in round-off by millimetres)."""
     steps = 330
     with SplitLineWorld(GEOMETRY, calibrated_config()) as world:
-        here = world.spawn(meshes[0], 0.0, 0, MASS, SPEED)
+        there = world.spawn(meshes[0], 0.0, 0, MASS, SPEED)
         for _ in range(5):
             world.step()
-        there = world.spawn(meshes[1], 100.0, 2, MASS, SPEED)
+        here = world.spawn(meshes[1], 100.0, 2, MASS, SPEED)
+        assert here in world._local.fillets and there in world._workers[0].models
         world.plan(steps * world.config.dt)
         while world.steps < steps:
             world.step()
         poses = world.segment_poses()
         assert world.model(there).total_mass == pytest.approx(MASS)
-    assert np.array_equal(poses[here], alone(meshes[0], 0.0, 0, 0, steps))
-    assert np.array_equal(poses[there], alone(meshes[1], 100.0, 2, 5, steps))
-    assert poses[here][-1, 2] < -0.02 and poses[there][-1, 0] > 0.05  # both past the edge
+    assert np.array_equal(poses[there], alone(meshes[0], 0.0, 0, 0, steps))
+    assert np.array_equal(poses[here], alone(meshes[1], 100.0, 2, 5, steps))
+    assert poses[there][-1, 2] < -0.02 and poses[here][-1, 0] > 0.05  # both past the edge
 
 
 def test_fillets_the_worker_removes_are_reported_after_the_next_poses(meshes):
@@ -87,9 +90,9 @@ def test_poses_before_the_planned_step_are_an_error(meshes):
 def test_a_dead_worker_is_an_error_not_a_hang(meshes):
     with SplitLineWorld(GEOMETRY, calibrated_config()) as world:
         world.spawn(meshes[0], 10.0, 0, MASS, SPEED)
-        os.kill(world._worker.pid, signal.SIGKILL)
+        os.kill(world._workers[0].process.pid, signal.SIGKILL)
         world.step()
-        with pytest.raises(RuntimeError, match="physics worker process died"):
+        with pytest.raises(RuntimeError, match="physics worker 0 process died"):
             world.segment_poses()
 
 
@@ -110,7 +113,7 @@ def test_the_worker_ends_when_its_parent_is_killed():
               "from woody_sim.split_world import SplitLineWorld\n"
               "if __name__ == '__main__':\n"
               "    world = SplitLineWorld(LineGeometry(), calibrated_config())\n"
-              "    print(world._worker.pid, flush=True)\n"
+              "    print(world._workers[0].process.pid, flush=True)\n"
               "    time.sleep(60)\n")
     parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
     worker = int(parent.stdout.readline())
@@ -138,3 +141,28 @@ def test_a_released_mesh_key_is_never_given_to_another_mesh(meshes):
         world.plan(world.config.dt)
         world.step()
         assert world.segment_poses() == {}
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="two physics workers need two cores")
+def test_each_spawn_goes_where_the_fewest_fillets_live_and_moves_as_alone(meshes):
+    """Six lanes spawning together over this process and two workers: two fillets each, workers first; a removed
+    fillet frees its world's place, and every chain still moves as a lone one."""
+    geometry = LineGeometry(lanes=6, spawn_x=-0.3)
+    with SplitLineWorld(geometry, calibrated_config(), workers=2) as world:
+        ids = [world.spawn(meshes[lane % 3], 100.0, lane, MASS, SPEED) for lane in range(6)]
+        assert [len(w.models) for w in world._workers] == [2, 2] and len(world._local.fillets) == 2
+        assert set(world._workers[0].models) == {ids[0], ids[3]} and set(world._local.fillets) == {ids[2], ids[5]}
+        world.plan(200 * world.config.dt)
+        while world.steps < 200:
+            world.step()
+        poses = world.segment_poses()
+    with LineWorld(geometry, calibrated_config()) as lone:
+        fid = lone.spawn(meshes[1], 100.0, 4, MASS, SPEED)
+        while lone.steps < 200:
+            lone.step()
+        assert np.array_equal(poses[ids[4]], lone.segment_poses()[fid])
+
+
+def test_more_workers_than_cores_are_refused():
+    with pytest.raises(ValueError, match="cores of this machine"):
+        SplitLineWorld(GEOMETRY, calibrated_config(), workers=(os.cpu_count() or 1) + 1)

@@ -25,8 +25,23 @@ def test_a_small_rate_per_reference_is_printed_to_four_significant_digits(monkey
     from woody_tools.commands import bench as command
 
     monkeypatch.setattr(command, "reference_ms", lambda: 1.836)
-    monkeypatch.setattr(command, "bench_graph", lambda: {"woody_run_rtf": 0.73, "verdicts": 70})
-    assert command.run(argparse.Namespace(target="graph", json_path=None)) == 0
+    monkeypatch.setattr(command, "bench_graph", lambda **line: {"woody_run_rtf": 0.73, "verdicts": 70})
+    assert command.run(argparse.Namespace(target="graph", json_path=None, lanes=3, speed_fpm=100.0)) == 0
     printed = dict(line.split() for line in capsys.readouterr().out.splitlines())
     assert printed == {"reference_ms": "1.836", "woody_run_rtf": "0.73", "woody_run_rtf_ref": "0.00134",
                        "verdicts": "70"}
+
+
+def test_the_line_to_benchmark_is_checked_like_woody_runs(capsys):
+    import argparse
+
+    from woody_tools.commands import bench as command
+
+    parser = argparse.ArgumentParser(prog="woody bench")
+    command.add_arguments(parser)
+    args = parser.parse_args(["sim", "--lanes", "6", "--speed-fpm", "130"])
+    assert (args.lanes, args.speed_fpm) == (6, 130.0)
+    for bad in (["--lanes", "7"], ["--lanes", "2.5"], ["--speed-fpm", "0"]):
+        with pytest.raises(SystemExit):
+            parser.parse_args(["graph", *bad])
+        assert "woody bench: error: argument" in capsys.readouterr().err

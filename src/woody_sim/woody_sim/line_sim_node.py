@@ -67,13 +67,14 @@ from woody_sim.line_conditions import (
 )
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
+from woody_sim.loop_phases import PhaseClock
 from woody_sim.meshes import MAX_YAW_SD_DEG, MeshError, load_mesh, load_mesh_set
 from woody_sim.pacing import LeadLimiter
 from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.sensor_model import sensor_preset, to_message_array
 from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
-from woody_sim.split_world import SplitLineWorld
+from woody_sim.split_world import MAX_PHYSICS_WORKERS, SplitLineWorld
 
 WORLD_FRAME = "world"
 TOP_FRAME = "top_camera_optical_frame"
@@ -126,8 +127,9 @@ class LineSim(Node):
         mu_dynamic = declare(self, "friction_dynamic", calibrated["friction_dynamic"], "Coulomb cap of the belt drive "
                              "once a segment slips.", 0.0, 10.0)
         segments = declare(self, "segments", 40, "Rigid segments N per fillet.", 2, 200)
-        workers = declare(self, "physics_workers", 1, "Worker processes that simulate every other fillet on "
-                          "another core (0 = all physics in this process).", 0, 1)
+        workers = declare(self, "physics_workers", 1, "Worker processes that share the physics with this one, "
+                          "each spawn going to the process with the fewest live fillets (0 = all physics in this "
+                          "process; at most the core count).", 0, MAX_PHYSICS_WORKERS)
         top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
         side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0,
                             MAX_SIDE_RATE_HZ)
@@ -218,7 +220,7 @@ class LineSim(Node):
                                      **top_camera_preset(p.top_camera))
         config = PhysicsConfig(n_segments=p.segments, damping=p.damping, friction_static=p.mu_static,
                                friction_dynamic=p.mu_dynamic)
-        self.world = SplitLineWorld(self.geometry, config) if p.workers else LineWorld(self.geometry, config)
+        self.world = SplitLineWorld(self.geometry, config, p.workers) if p.workers else LineWorld(self.geometry, config)
         meshes, errors = load_mesh_set(p.mesh_spec)
         for error in errors:
             self.get_logger().error(error)
@@ -376,34 +378,27 @@ class LineSim(Node):
         self._wait_for_subscribers(executor)
         frames, next_clock = FrameSchedule(self.top_period, self.side_period), 0.0
         in_flight: deque[float] = deque()  # sim stamps of the frames the renderer is working on, oldest first
+        phases = PhaseClock()
         wall_start, sim_start = time.monotonic(), self.world.time
         while not stop.is_set():
             self._spawn_due()
+            phases.lap("spawn")
             now = self.world.step()
+            phases.lap("physics")
             self._forget_removed()
             want_top, want_side = frames.due(now)
-            if want_top or want_side:
-                poses = self.world.segment_poses()
-                self.world.plan(frames.next_time)  # a worker world steps on while this frame goes out
-                want_side = want_side and self.side_gate.take(self.renderer.side_view_occupied(poses), now)
-            if want_top or want_side:
-                if want_top:
-                    self._hold_for_consumer(executor, now)
-                while in_flight and (self.renderer.ready() or not self.renderer.can_submit):
-                    self._publish_frames(self.renderer.collect(copy=False), in_flight.popleft())
-                self._publish_clock()
-                self.renderer.submit(poses, want_top=want_top, want_side=want_side)
-                in_flight.append(now)
+            if (want_top or want_side) and self._camera_frame(executor, frames, in_flight, now, want_top, want_side,
+                                                              phases):
                 next_clock = now + CLOCK_PERIOD
-                if want_top:  # serve /spawn_fillet at the top camera's rate: a spin costs ~0.5 ms
-                    executor.spin_once(timeout_sec=0.0)
             elif now >= next_clock:
                 self._publish_clock()
                 next_clock = now + CLOCK_PERIOD
+            phases.lap("publish")
             if self.realtime:
                 ahead = (now - sim_start) - (time.monotonic() - wall_start)
                 if ahead > 0.002:
                     time.sleep(ahead)
+                phases.lap("pace")
             if self.duration and now >= self.duration:
                 break
         while in_flight:
@@ -412,8 +407,35 @@ class LineSim(Node):
         self.get_logger().info(f"stopped at sim time {self.world.time:.2f} s after {elapsed:.1f} s wall "
                                f"(rtf {(self.world.time - sim_start) / max(elapsed, 1e-9):.2f}x), "
                                f"{self.spawned} fillets spawned")
+        self.get_logger().info(phases.summary())
         executor.remove_node(self)
         return 0
+
+    def _camera_frame(self, executor, frames: FrameSchedule, in_flight: deque, now: float, want_top: bool,
+                      want_side: bool, phases: PhaseClock) -> bool:
+        """A camera is due: gather the poses, publish the frames the renderer has finished, submit this one
+        (False: the side frame was not wanted after all, and nothing went out)."""
+        poses = self.world.segment_poses()
+        phases.lap("physics_sync")
+        self.world.plan(frames.next_time)  # a worker world steps on while this frame goes out
+        want_side = want_side and self.side_gate.take(self.renderer.side_view_occupied(poses), now)
+        if not (want_top or want_side):
+            return False
+        if want_top:
+            self._hold_for_consumer(executor, now)
+            phases.lap("hold_for_vision")
+        while in_flight and (self.renderer.ready() or not self.renderer.can_submit):
+            frames_done = self.renderer.collect(copy=False)
+            phases.lap("render_wait")
+            self._publish_frames(frames_done, in_flight.popleft())
+        self._publish_clock()
+        self.renderer.submit(poses, want_top=want_top, want_side=want_side)
+        in_flight.append(now)
+        if want_top:  # serve /spawn_fillet at the top camera's rate: a spin costs ~0.5 ms
+            phases.lap("publish")
+            executor.spin_once(timeout_sec=0.0)
+            phases.lap("serve")
+        return True
 
     def _forget_removed(self) -> None:
         """Stop rendering the fillets the world removed; a chain that blew up is worth a warning."""

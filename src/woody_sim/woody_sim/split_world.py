@@ -1,23 +1,24 @@
-"""Physics on two cores: every other fillet is simulated in a worker process.
+"""Physics on several cores: the fillets are simulated in worker processes, each spawn where the load is least.
 
-line_sim is bound by its physics on one core while the second core mostly idles (its renderer needs a
-fraction of it). Fillets never touch one another (belt and roller are static), so a fillet moves the same
-in whichever pybullet world it is: :class:`SplitLineWorld` hands every other spawn to a second
-:class:`~woody_sim.line_world.LineWorld` in a worker process. The lanes of a line spawn together, so with
-3 lanes the two worlds take 2 and 1 fillets of each spawn in turn.
+line_sim is bound by its physics: one core steps every chain while the others mostly idle. Fillets never touch
+one another (belt and roller are static), so a fillet moves the same in whichever pybullet world it is:
+:class:`SplitLineWorld` keeps a :class:`~woody_sim.line_world.LineWorld` in this process and one in each of
+``workers`` worker processes, and gives every spawn to the world with the fewest live fillets. The lanes of a
+line spawn together, so their crossings of the roller, the expensive part, are spread over the worlds as evenly
+as the counts allow; on a tie a worker wins, since this process also publishes the frames.
 
-The worker steps on its own between pose requests: :meth:`SplitLineWorld.plan` tells it the sim time of
-the next one, both worlds step at once until then, and :meth:`SplitLineWorld.segment_poses` at that step
-waits for the worker. Spawns reach the worker a few steps late and are placed where the belt has carried
-them since (exact: a fillet moves analytically until it nears the roller). Fillets the worker removes are
-reported with its poses, so :meth:`SplitLineWorld.take_removed` names them after the next pose request.
-A belt speed change is sent to both worlds before the worker can have passed its step, so both apply it at
-the same step.
+The workers step on their own between pose requests: :meth:`SplitLineWorld.plan` tells them the sim time of
+the next one, all worlds step at once until then, and :meth:`SplitLineWorld.segment_poses` at that step waits
+for each worker. Spawns reach a worker a few steps late and are placed where the belt has carried them since
+(exact: a fillet moves analytically until it nears the roller). Fillets a worker removes are reported with its
+poses, so :meth:`SplitLineWorld.take_removed` names them after the next pose request. A belt speed change is
+sent to every world before a worker can have passed its step, so all apply it at the same step.
 """
 
 from __future__ import annotations
 
 import multiprocessing.connection as mpc
+import os
 import traceback
 from typing import Any
 
@@ -30,25 +31,71 @@ from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig, check_fillet_id, check_lateral_offset, check_spawn
 from woody_sim.meshes import FilletMesh
 
+MAX_PHYSICS_WORKERS = 64
+"""The most worker processes a SplitLineWorld starts; :func:`check_workers` also caps them at the core count."""
+
+
+def check_workers(workers: int) -> int:
+    """``workers`` if this machine has a core for each (more only add switching), else ValueError."""
+    cores = os.cpu_count() or 1
+    if not 1 <= workers <= min(cores, MAX_PHYSICS_WORKERS):
+        raise ValueError(f"physics workers must be 1..{min(cores, MAX_PHYSICS_WORKERS)} (the cores of this "
+                         f"machine), got {workers}")
+    return workers
+
+
+class _Worker:
+    """One worker process, and what this process knows of its world."""
+
+    def __init__(self, index: int, geometry: LineGeometry, config: PhysicsConfig, start_method: str,
+                 timeout: float) -> None:
+        self.process = ChildProcess(_serve, (geometry, config), f"physics worker {index}", start_method, timeout)
+        self.models: dict[int, FilletModel] = {}
+        """Live fillets of this worker and their chain models (the worker builds its own copy)."""
+        self.poses: dict[int, np.ndarray] = {}
+        self.asked = self.reached = 0  # the step the worker was last sent to, and the step it answered from
+
+    def send_to(self, step: int) -> None:
+        if step > self.asked:
+            self.process.send(("advance", step))
+            self.asked = step
+
+    def wait_for(self, step: int, removed: list[int], blown: list[int]) -> None:
+        """Take answers until the worker has reached ``step``; its removals and blow-ups go to the lists."""
+        self.send_to(step)
+        while self.reached < step:
+            answer = self.process.recv()
+            if answer[0] != "at":
+                raise RuntimeError(f"{self.process.name} failed:\n{answer[1]}")
+            _, self.reached, gone, blew, self.poses = answer
+            for fillet_id in gone:
+                del self.models[fillet_id]
+            removed += gone
+            blown += blew
+
 
 class SplitLineWorld:
-    """The part of :class:`~woody_sim.line_world.LineWorld`'s interface line_sim uses, over two worlds in two
-    processes."""
+    """The part of :class:`~woody_sim.line_world.LineWorld`'s interface line_sim uses, over a world in this
+    process and one in each of ``workers`` processes."""
 
-    def __init__(self, geometry: LineGeometry, config: PhysicsConfig, start_method: str = "spawn",
+    def __init__(self, geometry: LineGeometry, config: PhysicsConfig, workers: int = 1, start_method: str = "spawn",
                  timeout: float = 30.0) -> None:
         if config.activation_margin is None:
             raise ValueError("SplitLineWorld needs fillets that start on the belt (activation_margin set)")
+        check_workers(workers)
         self.geometry, self.config = geometry, config
         self._local = LineWorld(geometry, config)
-        self._worker = ChildProcess(_serve, (geometry, config), "physics worker", start_method, timeout)
+        self._workers: list[_Worker] = []
+        try:
+            for index in range(workers):
+                self._workers.append(_Worker(index, geometry, config, start_method, timeout))
+        except BaseException:
+            self.close()
+            raise
         self._mesh_keys: dict[FilletMesh, int] = {}
-        self._remote_models: dict[int, FilletModel] = {}
-        self._remote_poses: dict[int, np.ndarray] = {}
-        self._asked = self._reached = 0  # the step the worker was last sent to, and the step it answered from
         self._removed: list[int] = []
         self._blown: list[int] = []
-        self._next_id = self._spawned = self._next_key = 0
+        self._next_id = self._next_key = 0
 
     @property
     def time(self) -> float:
@@ -60,109 +107,110 @@ class SplitLineWorld:
 
     @property
     def blown_up(self) -> list[int]:
-        """Ids of fillets removed because their chain blew up, in both worlds."""
+        """Ids of fillets removed because their chain blew up, in every world."""
         return self._local.blown_up + self._blown
 
     def model_for(self, mesh: FilletMesh) -> FilletModel:
-        """The chain geometry for a mesh; the worker builds its own copy meanwhile."""
+        """The chain geometry for a mesh; the workers build their own copies meanwhile."""
         self._mesh_key(mesh)
         return self._local.model_for(mesh)
 
     def _mesh_key(self, mesh: FilletMesh) -> int:
-        """A mesh is sent to the worker once and named by its key afterwards."""
+        """A mesh is sent to the workers once and named by its key afterwards."""
         key = self._mesh_keys.get(mesh)
         if key is None:
-            key = self._mesh_keys[mesh] = self._next_key  # never a released mesh's key: the worker forgot it
+            key = self._mesh_keys[mesh] = self._next_key  # never a released mesh's key: the workers forgot it
             self._next_key += 1
-            self._worker.send(("mesh", key, mesh))
+            self._broadcast(("mesh", key, mesh))
         return key
 
+    def _broadcast(self, msg: tuple) -> None:
+        for worker in self._workers:
+            worker.process.send(msg)
+
     def release(self, mesh: FilletMesh) -> None:
-        """As :meth:`LineWorld.release <woody_sim.line_world.LineWorld.release>`, in both worlds."""
+        """As :meth:`LineWorld.release <woody_sim.line_world.LineWorld.release>`, in every world."""
         self._local.release(mesh)
         key = self._mesh_keys.pop(mesh, None)
         if key is not None:
-            self._worker.send(("release", key))
+            self._broadcast(("release", key))
 
     def change_speed(self, speed_mps: float, at_time: float | None = None) -> None:
         """As :meth:`LineWorld.change_speed <woody_sim.line_world.LineWorld.change_speed>`; ``at_time`` may
-        not come before a step the worker has been sent on to (call it before :meth:`plan` passes it)."""
+        not come before a step a worker has been sent on to (call it before :meth:`plan` passes it)."""
         at = self.time if at_time is None else float(at_time)
-        if at < self._asked * self.config.dt - 1e-9:
-            raise ValueError(f"the physics worker may have stepped past {at} s already (up to "
-                             f"{self._asked * self.config.dt} s): change the belt speed earlier")
+        asked = max(w.asked for w in self._workers)
+        if at < asked * self.config.dt - 1e-9:
+            raise ValueError(f"the physics workers may have stepped past {at} s already (up to "
+                             f"{asked * self.config.dt} s): change the belt speed earlier")
         self._local.change_speed(speed_mps, at)
-        self._worker.send(("speed", float(speed_mps), at))
+        self._broadcast(("speed", float(speed_mps), at))
 
     def spawn(self, mesh: FilletMesh, k: float, lane: int, mass: float, speed_mps: float,
               fillet_id: int | None = None, lateral_offset: float = 0.0) -> int:
-        """As :meth:`LineWorld.spawn <woody_sim.line_world.LineWorld.spawn>`; every other fillet goes to the
-        worker."""
+        """As :meth:`LineWorld.spawn <woody_sim.line_world.LineWorld.spawn>`, in the world with the fewest live
+        fillets."""
         k, lane, mass, speed = check_spawn(self.geometry, k, lane, mass, speed_mps)
         lateral_offset = check_lateral_offset(lateral_offset)
-        live = self._remote_models.keys() | self._local.fillets.keys()
+        live = self._local.fillets.keys() | set().union(*(w.models for w in self._workers))
         fillet_id = check_fillet_id(self._next_id if fillet_id is None else fillet_id, live)
-        if self._spawned % 2:
-            self._send_to(self.steps)  # the worker must have reached the spawn's step when it reads it
-            self._worker.send(("spawn", self.steps, self._mesh_key(mesh), k, lane, mass, speed, fillet_id,
-                               lateral_offset))
-            self._remote_models[fillet_id] = self._local.model_for(mesh).with_mass(mass)
-        else:
+        worker = self._least_loaded()
+        if worker is None:
             self._local.spawn(mesh, k, lane, mass, speed, fillet_id, lateral_offset=lateral_offset)
-        self._spawned += 1
+        else:
+            key = self._mesh_key(mesh)
+            worker.send_to(self.steps)  # the worker must have reached the spawn's step when it reads it
+            worker.process.send(("spawn", self.steps, key, k, lane, mass, speed, fillet_id, lateral_offset))
+            worker.models[fillet_id] = self._local.model_for(mesh).with_mass(mass)
         self._next_id = max(self._next_id, fillet_id + 1)
         return fillet_id
 
+    def _least_loaded(self) -> _Worker | None:
+        """The worker with the fewest live fillets, or None for this process's world when it has fewer still."""
+        worker = min(self._workers, key=lambda w: len(w.models))
+        if len(self._local.fillets) < len(worker.models):
+            return None
+        return worker
+
     def model(self, fillet_id: int) -> FilletModel:
-        remote = self._remote_models.get(fillet_id)
-        return remote if remote is not None else self._local.model(fillet_id)
+        for worker in self._workers:
+            if fillet_id in worker.models:
+                return worker.models[fillet_id]
+        return self._local.model(fillet_id)
 
     def step(self) -> float:
-        """Step this process's world (the worker steps on its own towards the planned step)."""
+        """Step this process's world (the workers step on their own towards the planned step)."""
         return self._local.step()
 
     def plan(self, until: float) -> None:
         """The next :meth:`segment_poses` comes at the first step at or after sim time ``until``: start the
-        worker on the steps up to it."""
+        workers on the steps up to it."""
         dt = self.config.dt
         step = max(self.steps, int(until / dt) - 1)
         while step * dt + DUE_SLACK < until:  # the test FrameSchedule uses for a camera being due
             step += 1
-        self._send_to(step)
-
-    def _send_to(self, step: int) -> None:
-        if step > self._asked:
-            self._worker.send(("advance", step))
-            self._asked = step
+        for worker in self._workers:
+            worker.send_to(step)
 
     def segment_poses(self) -> dict[int, np.ndarray]:
-        """Every live fillet's (N, 7) segment poses now; waits for the worker to reach this step."""
-        if self._asked > self.steps:
-            raise RuntimeError(f"poses asked at step {self.steps}, but the worker was sent on to {self._asked}")
-        self._send_to(self.steps)
-        while self._reached < self.steps:
-            self._take_answer()
+        """Every live fillet's (N, 7) segment poses now; waits for the workers to reach this step."""
+        asked = max(w.asked for w in self._workers)
+        if asked > self.steps:
+            raise RuntimeError(f"poses asked at step {self.steps}, but the workers were sent on to {asked}")
         poses = self._local.segment_poses()
-        poses.update(self._remote_poses)
+        for worker in self._workers:
+            worker.wait_for(self.steps, self._removed, self._blown)
+            poses.update(worker.poses)
         return poses
 
-    def _take_answer(self) -> None:
-        answer = self._worker.recv()
-        if answer[0] != "at":
-            raise RuntimeError(f"physics worker failed:\n{answer[1]}")
-        _, self._reached, removed, blown, self._remote_poses = answer
-        for fillet_id in removed:
-            del self._remote_models[fillet_id]
-        self._removed += removed
-        self._blown += blown
-
     def take_removed(self) -> list[int]:
-        """Ids removed since the last call; the worker's as of the last :meth:`segment_poses`."""
+        """Ids removed since the last call; the workers' as of the last :meth:`segment_poses`."""
         removed, self._removed = self._local.take_removed() + self._removed, []
         return removed
 
     def close(self) -> None:
-        self._worker.close()
+        for worker in self._workers:
+            worker.process.close()
         self._local.close()
 
     def __enter__(self) -> SplitLineWorld:

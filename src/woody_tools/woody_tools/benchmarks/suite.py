@@ -13,6 +13,7 @@ compared with pybullet's TinyRenderer on the same scene.
 
 from __future__ import annotations
 
+import csv
 import re
 import statistics
 import subprocess
@@ -22,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from woody_common.line import REFERENCE_SPEED_FPM
+from woody_common.line import LANES, REFERENCE_SPEED_FPM
 from woody_common.stamps import stamp_to_seconds
-from woody_sim.meshes import BUILTIN_DIR
+from woody_sim.loop_phases import parse_summary
 from woody_tools.processes import NodeProcess, entry_point, lease_domain
 
 
@@ -63,7 +64,10 @@ def with_reference(figures: dict, reference: float) -> dict:
     return out
 
 
-def bench_sim(seconds: float) -> dict:
+def bench_sim(seconds: float, lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM) -> dict:
+    """Physics and rendering alone, then the real line_sim at ``lanes`` and ``speed_fpm``: its real-time factor,
+    where its loop spends the wall time, and the same line without physics workers and with a 200 Hz side
+    camera."""
     from woody_tools.benchmarks.physics import benchmark_physics
     from woody_tools.benchmarks.rendering import benchmark_rendering
 
@@ -77,37 +81,50 @@ def bench_sim(seconds: float) -> dict:
         figures[f"render_{view}_ms_p95"] = render[f"{view}_ms_p95"]
         figures[f"tinyrenderer_{view}_ms"] = render[f"tiny_{view}_ms_p50"]
         figures[f"render_{view}_speedup_vs_tinyrenderer"] = render[f"{view}_speedup_vs_tiny"]
-    figures["rtf"] = line_sim_rtf(seconds)
-    figures["rtf_without_physics_worker"] = line_sim_rtf(seconds, physics_workers=0)
-    figures["rtf_side_200hz"] = line_sim_rtf(seconds, side_rate_hz=200.0)
+    line = {"lanes": lanes, "speed_fpm": speed_fpm}
+    figures.update(lanes=lanes, speed_fpm=speed_fpm)
+    figures["rtf"], phases = line_sim_rtf(seconds, **line)
+    figures.update({f"phase_{name}_pct": share for name, share in phases.items()})
+    figures["rtf_without_physics_worker"] = line_sim_rtf(seconds, physics_workers=0, **line)[0]
+    figures["rtf_side_200hz"] = line_sim_rtf(seconds, side_rate_hz=200.0, **line)[0]
     return figures
 
 
-def bench_graph(fillets: int = 12) -> dict:
-    """`woody run` (demo graph with the recorder) and a sweep of the three reference meshes, as subprocesses."""
+def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, fillets_per_lane: int = 6) -> dict:
+    """`woody run` (the whole graph with the recorder) at ``lanes`` and ``speed_fpm``, and a sweep of the default
+    grid, as subprocesses."""
+    fillets = fillets_per_lane * lanes
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run"
-        demo = subprocess.run([entry_point("woody"), "run", "--fillets", str(fillets), "--out", str(out)],
-                              check=True, capture_output=True, text=True)
-        sweep = subprocess.run([entry_point("woody"), "sweep", "--meshes", str(BUILTIN_DIR), "--no-report", "--out",
-                                str(Path(tmp) / "sweep")], check=True, capture_output=True, text=True)
+        line = ["--lanes", str(lanes), "--speed-fpm", f"{speed_fpm:g}", "--fillets", str(fillets)]
+        demo = subprocess.run([entry_point("woody"), "run", *line, "--out", str(out)], check=True,
+                              capture_output=True, text=True)
+        with open(out / "verdicts.csv", newline="") as rows:
+            graded = sum(1 for row in csv.DictReader(rows) if row["verdict"])
+        sweep = subprocess.run([entry_point("woody"), "sweep", "--no-report", "--out", str(Path(tmp) / "sweep")],
+                               check=True, capture_output=True, text=True)
     rtf = re.search(r"wall: rtf ([0-9.]+)x", demo.stdout)
     line = re.search(r"the line itself, after ([0-9.]+) s of node start-up: rtf ([0-9.]+)x", demo.stdout)
     rate = re.search(r"= ([0-9.]+) /min", sweep.stdout + sweep.stderr)
     if rtf is None or line is None or rate is None:
         raise RuntimeError("woody run or woody sweep did not report its speed")
-    return {"woody_run_rtf": float(rtf.group(1)), "woody_run_line_rtf": float(line.group(2)),
+    return {"lanes": lanes, "speed_fpm": speed_fpm, "woody_run_fillets": fillets, "woody_run_verdicts": graded,
+            "woody_run_rtf": float(rtf.group(1)), "woody_run_line_rtf": float(line.group(2)),
             "woody_run_startup_s": float(line.group(1)), "sweep_evals_per_min": float(rate.group(1))}
 
 
-def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = REFERENCE_SPEED_FPM, side_rate_hz: float = 60.0,
-                 physics_workers: int = 1) -> float:
-    """Sim seconds per wall second of the real line_sim process (3 lanes, top 30 Hz, side ``side_rate_hz``;
-    ``physics_workers=0`` keeps all its physics in its main process)."""
+def line_sim_rtf(seconds: float, lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM,
+                 side_rate_hz: float = 60.0, physics_workers: int | None = None) -> tuple[float, dict[str, float]]:
+    """Sim seconds per wall second of the real line_sim process (top 30 Hz, side ``side_rate_hz``; its default
+    physics workers unless ``physics_workers`` is given), and its loop's wall time by phase (percent)."""
     import rclpy
     from rosgraph_msgs.msg import Clock
 
     warmup = 2.0
+    params = {"lanes": lanes, "line_speed_fpm": speed_fpm, "top_rate_hz": 30.0, "side_rate_hz": side_rate_hz,
+              "duration_s": warmup + seconds}
+    if physics_workers is not None:
+        params["physics_workers"] = physics_workers
     with lease_domain() as lease, tempfile.TemporaryDirectory() as logs:
         context = rclpy.Context()
         rclpy.init(context=context, domain_id=lease.domain_id)
@@ -115,10 +132,7 @@ def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = REFERENCE_SP
         samples: list[tuple[float, float]] = []
         node.create_subscription(Clock, "/clock", lambda m: samples.append(
             (time.monotonic(), stamp_to_seconds(m.clock))), 100)
-        sim = NodeProcess("line_sim", {"lanes": lanes, "line_speed_fpm": speed_fpm, "top_rate_hz": 30.0,
-                                       "side_rate_hz": side_rate_hz, "duration_s": warmup + seconds,
-                                       "physics_workers": physics_workers},
-                          domain_id=lease.domain_id, log_dir=Path(logs))
+        sim = NodeProcess("line_sim", params, domain_id=lease.domain_id, log_dir=Path(logs))
         executor = rclpy.executors.SingleThreadedExecutor(context=context)
         executor.add_node(node)
         try:
@@ -128,11 +142,12 @@ def line_sim_rtf(seconds: float, lanes: int = 3, speed_fpm: float = REFERENCE_SP
             sim.stop()
             node.destroy_node()
             rclpy.try_shutdown(context=context)
+        phases = parse_summary(sim.log_path.read_text(errors="replace"))
         steady = [(w, s) for w, s in samples if s >= warmup]
         if len(steady) < 2:
             raise RuntimeError(f"line_sim published too little /clock to measure; see its log:\n{sim.log_tail()}")
         (w0, s0), (w1, s1) = steady[0], steady[-1]
-        return (s1 - s0) / (w1 - w0)
+        return (s1 - s0) / (w1 - w0), phases
 
 
 def bench_vision(frames: int, seconds: float) -> dict:

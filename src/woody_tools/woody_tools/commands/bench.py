@@ -10,7 +10,13 @@ import argparse
 import json
 from pathlib import Path
 
+from woody_common.line import LANES, MAX_LANES, REFERENCE_SPEED_FPM, SPEED_RANGE_FPM
+from woody_tools import arguments
 from woody_tools.benchmarks.suite import bench_graph, bench_sim, bench_vision, reference_ms, with_reference
+
+LANE_COUNT = arguments.number(lambda n: n == int(n) and 1 <= n <= MAX_LANES, f"must be a whole number 1..{MAX_LANES}")
+LINE_SPEED = arguments.number(lambda s: SPEED_RANGE_FPM[0] <= s <= SPEED_RANGE_FPM[1],
+                              f"must be within {SPEED_RANGE_FPM[0]:g}..{SPEED_RANGE_FPM[1]:g} FPM")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -18,12 +24,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", dest="json_path", default=None, help="also write the figures to this JSON file")
     parser.add_argument("--seconds", type=float, default=10.0, help="sim seconds of each timed run (default 10)")
     parser.add_argument("--frames", type=int, default=300, help="frames per vision timing run (default 300)")
+    parser.add_argument("--lanes", type=LANE_COUNT, default=LANES,
+                        help=f"lanes of the line `sim` and `graph` run (default {LANES})")
+    parser.add_argument("--speed-fpm", type=LINE_SPEED, default=REFERENCE_SPEED_FPM,
+                        help=f"line speed of the line `sim` and `graph` run, in FPM (default {REFERENCE_SPEED_FPM:g})")
 
 
 def run(args: argparse.Namespace) -> int:
     reference = reference_ms()
-    benches = {"sim": lambda: bench_sim(args.seconds), "vision": lambda: bench_vision(args.frames, args.seconds),
-               "graph": bench_graph}
+    line = {"lanes": int(args.lanes), "speed_fpm": args.speed_fpm}
+    benches = {"sim": lambda: bench_sim(args.seconds, **line),
+               "vision": lambda: bench_vision(args.frames, args.seconds), "graph": lambda: bench_graph(**line)}
     figures = benches[args.target]()
     figures = {"reference_ms": reference, **with_reference(figures, 0.5 * (reference + reference_ms()))}
     width = max(len(k) for k in figures)
