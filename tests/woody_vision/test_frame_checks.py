@@ -8,7 +8,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from woody_vision.frame_checks import RESIZE_CONFIRM_FRAMES, FrameChecker, FrameError, image_to_array
+from woody_vision.frame_checks import (
+    GAP_FRAMES,
+    RESIZE_CONFIRM_FRAMES,
+    RESTART_JUMP_S,
+    FrameChecker,
+    FrameError,
+    SimTimeWatch,
+    frame_interval,
+    image_to_array,
+    is_gap,
+)
 
 
 def image_msg(array: np.ndarray, encoding: str, stamp: float = 0.0, pad: int = 0, bigendian: bool = False,
@@ -97,3 +107,30 @@ def test_frame_checker_counts_rejects_and_throttles_the_log():
         checker.reject("encoding 'bgr8' where rgb8 is expected; frame skipped")
     checker.reject("empty frame (0 pixels); frame skipped")
     assert checker.rejected == 6 and len(logger.lines) == 2
+
+
+def test_a_step_of_more_than_gap_frames_intervals_is_a_gap():
+    assert frame_interval([0.0, 0.5, 1.0, 1.0167, 1.0333, 1.1]) == pytest.approx(0.0166, abs=1e-3)
+    assert math.isinf(frame_interval([2.0])) and math.isinf(frame_interval([1.0, 1.0]))
+    assert not is_gap(2 * 0.02, 0.02) and is_gap(3 * 0.02, 0.02)  # one lost frame is tolerated, two are not
+    assert not is_gap(GAP_FRAMES * 0.02, 0.02) and not is_gap(10.0, math.inf)
+
+
+def test_sim_time_going_back_is_noticed_once_per_jump_whichever_source_shows_it_first():
+    watch = SimTimeWatch()
+    assert not any(watch.went_back(source, t) for t in (1.0, 2.0, 3.0) for source in ("depth", "side"))
+    assert not watch.went_back("side", 3.0 - 0.9 * RESTART_JUMP_S), "a stray late frame is no jump"
+    assert watch.clock_current(12.0), "a clock ahead of lagging frames tells the time"
+    assert watch.went_back("depth", 0.2)  # a replay started again
+    assert not watch.went_back("side", 0.2), "the same jump on another stream counts once"
+    assert not watch.clock_current(12.0), "the clock has not jumped yet: its time is gone"
+    assert not watch.clock_went_back(0.25) and watch.clock_current(0.25)
+    assert not watch.went_back("depth", 0.3) and not watch.went_back("side", 0.3)
+
+
+def test_a_clock_jump_counts_while_the_streams_are_still_ahead_of_it():
+    watch = SimTimeWatch()
+    watch.went_back("tracks", 20.0)
+    assert watch.clock_went_back(0.5), "the clock jumped first"
+    assert not watch.went_back("tracks", 0.6), "the streams follow: no second reset"
+    assert not SimTimeWatch().clock_went_back(0.0), "nothing seen yet: nothing to forget"

@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from woody_vision.grader_core import SIDE_MATCH_SLACK_S, FilletGrader, GradedFillet, TrackObservation
+from woody_vision.grader_core import (
+    REASON_NO_SIDE,
+    SIDE_MATCH_SLACK_S,
+    FilletGrader,
+    GradedFillet,
+    TrackObservation,
+)
 from woody_vision.grading import GradingRules
 from woody_vision.shape_score import REASON_LOST_IN_WINDOW, REASON_STARTED_PAST_EDGE, STATUS_SCORED
 from woody_vision.side_view import SideMeasurement
@@ -232,3 +238,61 @@ def test_grader_validates_its_options():
     with pytest.raises(ValueError):
         FilletGrader(EDGE, evaluator_options={"tip_ratio": 2.0})
     assert math.isinf(FilletGrader(EDGE).now)
+
+
+def test_a_side_passage_with_lost_frames_gives_the_verdict_no_side_metrics_but_the_reason():
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    shapes = contours(90)
+    close = closing_stamp(shapes)
+    assert feed(grader, 14, WATCHED, through_close(shapes)) == []
+    nan = math.nan
+    partial = SideMeasurement(nmdm=nan, mdm_min_px=nan, be=nan, h_px=nan, stamp_of_min=nan, first_stamp=close - 0.1,
+                              last_stamp=close + 0.3, frames=12, reason="side view absent: frames lost in the passage")
+    (verdict,) = grader.on_side(partial)
+    assert verdict.scored and verdict.side is partial and math.isnan(verdict.side.nmdm)
+    assert verdict.reason == "side view absent: frames lost in the passage"
+
+
+def test_a_verdict_released_without_its_side_passage_says_why():
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    shapes = contours(90)
+    close = closing_stamp(shapes)
+    feed(grader, 15, WATCHED, through_close(shapes))
+    (verdict,) = grader.release(close + WAIT)
+    assert verdict.side is None and verdict.reason == REASON_NO_SIDE.format(WAIT)
+    (other,) = [v for _, v in feed(FilletGrader(EDGE, watched_lane=WATCHED), 16, 0, shapes)]
+    assert other.reason == "", "a lane the side camera does not watch has no side metrics to miss"
+
+
+def test_a_window_with_lost_frames_is_unscored_on_the_paper_score_and_has_no_phi_on_the_line_score():
+    shapes = contours(90, bend=0.5)
+    ((_, whole),) = feed(FilletGrader(EDGE, GradingRules(5.0)), 0, 0, shapes)
+    opens = round(whole.shape.trace[0].stamp * FPS)
+    kept = shapes[:opens + 1] + shapes[opens + 3:]  # two frames lost in the window
+    stamps = [i / FPS for i in range(len(shapes)) if not opens + 1 <= i <= opens + 2]
+    for score in ("paper", "line"):
+        grader = FilletGrader(EDGE, GradingRules(5.0), score=score)
+        (verdict,) = [v for stamp, contour in zip(stamps, kept)
+                      for v in grader.on_tracks(stamp, [TrackObservation(0, 0, contour)])]
+        assert math.isnan(verdict.shape.phi) and verdict.reason.startswith("phi absent: frames lost")
+        if score == "paper":
+            assert verdict.label == "unscored"
+        else:  # the line score is measured at its own moment, between frames that did arrive
+            assert (verdict.label, verdict.score) == (whole.label, whole.score) and whole.label != "unscored"
+
+
+def test_after_a_reset_the_same_frames_give_the_same_verdicts():
+    """Sim time went back (a replay started again): the grader forgets what was in progress and grades anew."""
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    shapes = contours(90)
+    close = closing_stamp(shapes, 5.0)
+    runs = []
+    for _ in range(2):
+        assert feed(grader, 17, WATCHED, through_close(shapes), t0=5.0) == []
+        runs.append(grader.on_side(side(close - 0.1, close + 0.3, nmdm=0.42)))
+        feed(grader, 18, WATCHED, through_close(shapes), t0=20.0)  # held for its side passage when time goes back
+        assert grader.reset() == (2, 1)  # tracks 17 (not ended yet) and 18, and 18's held verdict
+        assert math.isinf(grader.now) and grader.reset() == (0, 0)
+    first, second = runs
+    assert len(first) == len(second) == 1 and first[0].side.nmdm == second[0].side.nmdm == 0.42
+    assert first[0].shape.phi == second[0].shape.phi and first[0].label == second[0].label

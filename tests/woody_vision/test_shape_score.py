@@ -23,6 +23,7 @@ from woody_vision.shape_score import (
     REASON_LOST_BEFORE_EDGE,
     REASON_LOST_IN_WINDOW,
     REASON_STARTED_PAST_EDGE,
+    REASON_WINDOW_GAP,
     STATUS_SCORED,
     STATUS_UNSCORED,
     ShapeEvaluator,
@@ -423,3 +424,39 @@ def test_frames_of_a_track_that_switched_to_the_neighbour_are_rejected():
     assert result is None  # no clean frame closes the window: the fillet waits for its track to end
     ended = evaluator.finish()
     assert ended.status == STATUS_UNSCORED and ended.rejected_frames == len(switched) - opens
+
+
+# ------------------------------------------------------------------ frames lost in the window
+
+
+def run_without(contours, lost: set[int], edge: float = EDGE):
+    """The evaluator fed every frame but the ``lost`` ones, each at its own stamp; the result."""
+    evaluator = ShapeEvaluator(edge)
+    results = [evaluator.update(c, i / FPS) for i, c in enumerate(contours) if i not in lost]
+    (result,) = [r for r in results if r is not None]
+    return result
+
+
+def test_frames_lost_inside_the_window_leave_phi_absent_with_the_reason_and_keep_the_line_score():
+    contours = translating(80, bend=drooping)
+    _, whole, _ = run_evaluator(contours)
+    opens, closes = (round(f.stamp * FPS) for f in (whole.trace[0], whole.trace[-1]))
+    assert closes - opens >= 4 and whole.reason == "" and math.isfinite(whole.phi) and whole.window_closed
+    gap = run_without(contours, {opens + 1, opens + 2})  # two frames in a row: a step of 3 frame intervals
+    assert gap.status == STATUS_SCORED and gap.reason == REASON_WINDOW_GAP.format(3 / FPS)
+    assert math.isnan(gap.phi) and math.isnan(gap.hu_term) and math.isnan(gap.solidity_term)
+    assert not gap.window_closed
+    assert gap.line_phi == pytest.approx(whole.line_phi, abs=1e-9)  # measured at its own moment, frames around it
+    assert gap.stamp == whole.stamp
+
+
+def test_one_lost_frame_or_frames_lost_before_the_window_change_nothing():
+    contours = translating(80, bend=drooping)
+    _, whole, _ = run_evaluator(contours)
+    opens = round(whole.trace[0].stamp * FPS)
+    one = run_without(contours, {opens + 1})  # a step of 2 frame intervals is no gap
+    assert one.reason == "" and one.window_closed and math.isfinite(one.phi)
+    assert one.phi == pytest.approx(max(f.phi for f in whole.trace if f.stamp != (opens + 1) / FPS), abs=1e-9)
+    early = run_without(contours, {opens - 8, opens - 7, opens - 6})  # lost while flat, long before the window
+    assert (early.status, early.reason, early.phi, early.line_phi) == (whole.status, "", whole.phi, whole.line_phi)
+

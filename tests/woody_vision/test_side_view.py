@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from woody_vision.side_view import (
+    REASON_SIDE_GAP,
+    SideMeasurement,
     SidePassageTracker,
     bending_energy,
     difference_mask,
@@ -58,14 +60,20 @@ def test_disc_silhouette_centroid_and_mdm():
     assert mdm((m["m10"] / m["m00"], m["m01"] / m["m00"]), AXLE) == pytest.approx(math.dist(centre, AXLE), abs=0.3)
 
 
+def disc_passage(r: float = 20.0) -> list[tuple[float, float]]:
+    """Centres of a disc rolling along the belt to the roller, then circling the axle."""
+    closest = 0.8 * (R + r)
+    frames = [(u, AXLE[1] - R - r) for u in np.arange(150.0, 400.0, 25.0)]
+    return frames + [(AXLE[0] + closest * math.sin(a), AXLE[1] - closest * math.cos(a))
+                     for a in np.radians(np.arange(-70.0, 71.0, 10.0))]
+
+
 def test_passage_of_a_disc_gives_known_min_mdm_h_and_nmdm():
     """A disc of radius r rolls along the belt (h = r), then circles the axle at distance D: NMDM = D / (R + r)."""
     r = 20.0
     closest = 0.8 * (R + r)
     tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
-    frames: list[tuple[float, float]] = [(u, AXLE[1] - R - r) for u in np.arange(150.0, 400.0, 25.0)]
-    frames += [(AXLE[0] + closest * math.sin(a), AXLE[1] - closest * math.cos(a))
-               for a in np.radians(np.arange(-70.0, 71.0, 10.0))]
+    frames = disc_passage(r)
     out = []
     for i, centre in enumerate(frames):
         out += tracker.update(with_disc(centre, r), i * DT)
@@ -261,3 +269,45 @@ def test_the_difference_mask_sums_absolute_channel_differences_beyond_255_and_re
     assert not difference_mask(strided, np.zeros((7, 9, 3), np.uint8), 0).any()
     with pytest.raises(ValueError, match="two \\(H, W, 3\\) images"):
         difference_mask(image[..., 0], background[..., 0], 40)
+
+
+def measure(lost: set[int], idle_before: int = 0) -> SideMeasurement:
+    """The disc's passage with the ``lost`` frames missing, after ``idle_before`` empty frames at the idle rate."""
+    tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
+    t0 = idle_before * 0.5
+    for j in range(idle_before):
+        assert tracker.update(SCENE.background(), j * 0.5) == []
+    out = [m for i, centre in enumerate(disc_passage()) if i not in lost
+           for m in tracker.update(with_disc(centre, 20.0), t0 + i * DT)]
+    (m,) = out + flush(tracker, t0 + len(disc_passage()) * DT)
+    return m
+
+
+def test_a_passage_with_lost_frames_has_no_side_metrics_but_the_reason():
+    whole = measure(set())
+    assert whole.complete and whole.reason == "" and math.isfinite(whole.nmdm)
+    middle = len(disc_passage()) - 8  # the disc at the top of the roller: the minimum MDM is lost with it
+    gap = measure({middle - 1, middle, middle + 1})
+    assert not gap.complete and gap.reason == REASON_SIDE_GAP.format(4 * DT, DT)
+    assert math.isnan(gap.nmdm) and math.isnan(gap.mdm_min_px) and math.isnan(gap.be)
+    assert (gap.first_stamp, gap.last_stamp) == (whole.first_stamp, whole.last_stamp), "still matched to its verdict"
+
+
+def test_one_lost_frame_and_a_slow_idle_camera_before_the_passage_change_nothing():
+    whole = measure(set())
+    one = measure({5})  # a step of two frame intervals
+    assert one.complete and one.nmdm == pytest.approx(whole.nmdm) and one.frames == whole.frames - 1
+    after_idle = measure(set(), idle_before=4)  # 0.5 s steps while the view was empty, then the camera's rate
+    assert after_idle.complete and after_idle.nmdm == pytest.approx(whole.nmdm, abs=1e-12)
+
+
+def test_frames_lost_while_the_passage_ends_count_too():
+    tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
+    for i, centre in enumerate(disc_passage()):
+        tracker.update(with_disc(centre, 20.0), i * DT)
+    end = len(disc_passage()) * DT
+    assert tracker.update(SCENE.background(), end) == []
+    (m,) = flush(tracker, end + 1.0)  # frames lost after the disc left: it may have come back in them
+    assert not m.complete and math.isnan(m.nmdm)
+    tracker.reset()
+    assert math.isinf(tracker.interval)

@@ -7,7 +7,11 @@ The top-down window of a fillet closes when its virtual centroid crosses the
 roller edge; the side camera finishes measuring that fillet a little later
 (it is still falling). Verdicts of the watched lane are therefore held until
 the side passage that overlaps them ends, or for at most ``side_wait_s`` of
-sim time, so each fillet still gets exactly one verdict.
+sim time, so each fillet still gets exactly one verdict. A verdict released
+without a whole side passage has NMDM, MDM and BE absent and says why, like
+one whose passage lost frames (woody_vision.side_view); Φ over a window with
+lost frames is absent the same way (woody_vision.shape_score). When sim time
+goes back (a replay started again) the node calls :meth:`FilletGrader.reset`.
 """
 
 from __future__ import annotations
@@ -32,6 +36,8 @@ from woody_vision.side_view import SideMeasurement
 
 DEFAULT_SIDE_WAIT_S = 0.8
 """Longest a watched-lane verdict waits for its side-view measurement (sim s)."""
+
+REASON_NO_SIDE = "side view absent: no whole side passage of this fillet ended within {:.1f} s of its window"
 
 SIDE_MATCH_SLACK_S = 0.3
 """A side passage matches a top-down window closing up to this long before or after the passage."""
@@ -70,10 +76,17 @@ class GradedFillet:
     """What the top camera measured of the fillet's speed and direction."""
     threshold: float = math.nan
     """The reject cut's value for this fillet."""
+    side_reason: str = ""
+    """Why a watched-lane verdict carries no side-view metrics ('' when it does, or the lane is not watched)."""
 
     @property
     def scored(self) -> bool:
         return self.shape.status == STATUS_SCORED
+
+    @property
+    def reason(self) -> str:
+        """Why the fillet is unscored or a metric is absent ('' when every metric it should carry is there)."""
+        return "; ".join(r for r in (self.shape.reason, self.side_reason) if r)
 
 
 SCORE_LINE = "line"
@@ -118,16 +131,26 @@ class FilletGrader:
         if self.side_wait_s < 0:
             raise ValueError(f"side_wait_s must be >= 0, got {self.side_wait_s}")
         ShapeEvaluator(self.edge_row, **self.evaluator_options)  # validate options now
-        self._evaluators: dict[int, ShapeEvaluator] = {}
-        self._lanes: dict[int, int] = {}
-        self._pending: list[_Pending] = []
-        self._side: list[SideMeasurement] = []
-        self.now = -math.inf
+        self._forget()
         self.fragments = 0
         """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_lane_has_approached`)."""
         self.tentative = 0
         """Tracks that ended after fewer than MIN_SIGHTINGS frames (a fillet's first sightings at the image border
         before a burst of lost frames, noise): no verdict, like a tentative track in SORT-style trackers."""
+
+    def reset(self) -> tuple[int, int]:
+        """Forget every fillet (evaluators, held verdicts, side measurements) and the time: sim time went back,
+        and what was in progress belongs to a timeline that is gone. Returns (tracks, held verdicts) dropped."""
+        dropped = (len(self._evaluators), len(self._pending))
+        self._forget()
+        return dropped
+
+    def _forget(self) -> None:
+        self._evaluators: dict[int, ShapeEvaluator] = {}
+        self._lanes: dict[int, int] = {}
+        self._pending: list[_Pending] = []
+        self._side: list[SideMeasurement] = []
+        self.now = -math.inf
 
     def on_tracks(self, stamp: float, tracks: Sequence[TrackObservation],
                   ended_ids: Iterable[int] = ()) -> list[GradedFillet]:
@@ -176,7 +199,7 @@ class FilletGrader:
             if side is not None:
                 out.append(_with_side(pending.graded, side))
             elif self.now >= pending.deadline:
-                out.append(pending.graded)
+                out.append(dataclasses.replace(pending.graded, side_reason=REASON_NO_SIDE.format(self.side_wait_s)))
             else:
                 keep.append(pending)
         self._pending = keep
@@ -226,4 +249,4 @@ class FilletGrader:
 
 
 def _with_side(graded: GradedFillet, side: SideMeasurement) -> GradedFillet:
-    return dataclasses.replace(graded, side=side)
+    return dataclasses.replace(graded, side=side, side_reason=side.reason)

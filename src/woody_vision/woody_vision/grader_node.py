@@ -4,7 +4,10 @@ Thin adapter over woody_vision.grader_core. The roller edge row comes from
 the top camera's calibration (K from camera_info, plus the camera height and
 the edge offset from its optical axis as parameters), never from a pixel
 constant; the side view's roller axle and radius are parameters of that
-camera's calibration.
+camera's calibration. When sim time goes back (/clock, the track stamps or
+the side frames' stamps; a replay started again, a restarted line) it forgets
+every fillet in progress, with one log line, so a second pass is graded like
+the first.
 
 The Φ threshold and the line's cuts are parameters with plain defaults: the
 params file the node is started with (`woody run` passes the calibration) is
@@ -43,7 +46,7 @@ from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletTrackArray, FilletVerdict
 from woody_vision import side_view
 from woody_vision.camera_model import edge_row
-from woody_vision.frame_checks import FrameChecker, FrameError
+from woody_vision.frame_checks import FrameChecker, FrameError, SimTimeWatch, watch_clock
 from woody_vision.grader_core import (
     DEFAULT_SIDE_WAIT_S,
     SCORE_LINE,
@@ -118,6 +121,8 @@ class Grader(Node):
         self.side = SidePassageTracker(**self.side_options) if self.side_enabled else None
         side_view.warm_up()  # before any subscription: the first passage is measured whole, never while compiling
         self.side_checker = FrameChecker(self.get_logger())
+        self.sim_time = SimTimeWatch()
+        self.clock_jumps = watch_clock(self, self.sim_time, self.forget)
         self.published = 0
         markers = declare(self, "publish_markers", True, "Publish grading/markers (visualization_msgs/ImageMarker: "
                           "each track's contour on the top image, coloured by its verdict and labelled in ns with id, "
@@ -174,14 +179,16 @@ class Grader(Node):
                 self.early_tracks.append(msg)
             return
         self.frame_id = msg.header.frame_id
+        stamp = stamp_to_seconds(msg.header.stamp)
+        if self.sim_time.went_back("tracks", stamp):
+            self.forget(f"{topics.TRACKS} stamp went back to {stamp:.2f} s")
         odd = [t.id for t in msg.tracks if len(t.contour_uv) % 2]
         if odd:
             self.side_checker.reject(f"tracks {odd}: contour_uv of odd length (u, v pairs expected); those skipped")
         tracks = [TrackObservation(t.id, t.lane, np.frombuffer(t.contour_uv, np.int32).reshape(-1, 2), t.unseen)
                   for t in msg.tracks if len(t.contour_uv) >= 6 and len(t.contour_uv) % 2 == 0]
-        self._publish(self.core.on_tracks(stamp_to_seconds(msg.header.stamp), tracks, msg.ended_ids))
+        self._publish(self.core.on_tracks(stamp, tracks, msg.ended_ids))
         if self.marker_pub is not None:
-            stamp = stamp_to_seconds(msg.header.stamp)
             for track in tracks:
                 label = self.labels.get(track.track_id, "pending")
                 overlay = Overlay(track.track_id, track.lane, label, FRAME, stamp, outline(track.contour),
@@ -189,21 +196,34 @@ class Grader(Node):
                 self.marker_pub.publish(self._marker(msg.header, overlay))
 
     def on_side_image(self, msg: Image) -> None:
+        stamp = stamp_to_seconds(msg.header.stamp)
+        if self.sim_time.went_back("side", stamp):
+            self.forget(f"{topics.SIDE_IMAGE} stamp went back to {stamp:.2f} s")
         try:
             rgb = color_rgb(msg)
             self.side_checker.check(msg, rgb.shape)
         except FrameError as exc:
             self.side_checker.reject(f"side camera: {exc}")
             return
-        if self.side_checker.restarted:
+        if self.side_checker.restarted:  # the size changed
             self.side.reset()
-        for measurement in self.side.update(rgb, stamp_to_seconds(msg.header.stamp)):
+        for measurement in self.side.update(rgb, stamp):
             if self.core is not None:
                 self._publish(self.core.on_side(measurement))
 
+    def forget(self, why: str) -> None:
+        """Sim time went back: drop every fillet in progress (tracks, held verdicts, side passages)."""
+        tracks, held = self.core.reset() if self.core is not None else (0, 0)
+        if self.side is not None:
+            self.side.reset()
+            self.side_checker.reset()
+        self.labels.clear()
+        self.get_logger().warning(f"sim time went back ({why}): forgot {tracks} tracks in progress and {held} "
+                                  "verdicts waiting for the side view; grading starts over")
+
     def on_timer(self) -> None:
-        if self.core is not None:
-            now = self.get_clock().now().nanoseconds * 1e-9
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if self.core is not None and self.sim_time.clock_current(now):
             self._publish(self.core.release(now))
 
     def _publish(self, graded: list[GradedFillet]) -> None:
@@ -235,7 +255,7 @@ class Grader(Node):
         conditions = fillet.conditions or FilletConditions(nan)
         msg = FilletVerdict(
             fillet_id=fillet.fillet_id, lane=max(fillet.lane, 0), classification=LABELS[fillet.label],
-            grade=fillet.grade, unscored_reason=shape.reason, score=_finite_or_nan(fillet.score),
+            grade=fillet.grade, unscored_reason=fillet.reason, score=_finite_or_nan(fillet.score),
             line_phi=_finite_or_nan(shape.line_phi), line_fraction=shape.line_fraction,
             speed=_finite_or_nan(conditions.speed_mps), leading_end=shape.leading_end,
             turn=_finite_or_nan(conditions.turn_deg), length=_finite_or_nan(conditions.length_m),

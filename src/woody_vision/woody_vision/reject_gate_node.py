@@ -9,7 +9,10 @@ verdict has none), so the gate opens at
 changes keeps its timing. A verdict that arrives after that moment is late:
 it is logged and counted, never acted on. Unscored fillets are diverted by
 default (``divert_unscored``): on a crowded or messy line a fillet that could
-not be measured cleanly may be woody.
+not be measured cleanly may be woody. The gate keeps no per-fillet state:
+every command carries its absolute actuation time. When sim time goes back
+(/clock or the verdict stamps; a replay started again) it says so in one log
+line, and the verdicts that follow are timed on the new clock.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from woody_common.line import LANES, MAX_LANES, REFERENCE_SPEED_FPM, SPEED_RANGE
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletVerdict, GateCommand
+from woody_vision.frame_checks import SimTimeWatch, watch_clock
 from woody_vision.gate_timing import GateTiming
 
 
@@ -51,18 +55,26 @@ class RejectGate(Node):
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.publisher = self.create_publisher(GateCommand, topics.GATE_COMMANDS, reliable)
         self.create_subscription(FilletVerdict, topics.VERDICTS, self.on_verdict, reliable)
+        self.sim_time = SimTimeWatch()
+        self.clock_jumps = watch_clock(self, self.sim_time, self.time_went_back)
+
+    def time_went_back(self, why: str) -> None:
+        self.get_logger().warning(f"sim time went back ({why}): the verdicts that follow are timed on the new "
+                                  f"clock ({self.diverted} diverted, {self.late} late, {self.passed} passed so far)")
 
     def close(self) -> None:
         print(f"[reject_gate] diverted {self.diverted}, late {self.late}, passed {self.passed}", flush=True)
 
     def on_verdict(self, verdict: FilletVerdict) -> None:
+        crossing = stamp_to_seconds(verdict.header.stamp)
+        if self.sim_time.went_back("verdicts", crossing):
+            self.time_went_back(f"{topics.VERDICTS} stamp went back to {crossing:.2f} s")
         woody = verdict.classification == FilletVerdict.CLASS_WOODY
         unscored = verdict.classification == FilletVerdict.CLASS_UNSCORED
         if not (woody or (unscored and self.divert_unscored)):
             self.passed += 1
             return
         now = self.get_clock().now().nanoseconds * 1e-9
-        crossing = stamp_to_seconds(verdict.header.stamp)
         try:
             actuation = self.timing.actuation_time(verdict.lane, crossing, verdict.speed)
         except ValueError as exc:

@@ -8,6 +8,9 @@ With ``color_threshold`` > 0 the outline comes from the registered colour
 frame of the same stamp (a depth frame waits for it until the next depth
 frame arrives; one whose colour never came is skipped like a lost frame, so
 no depth-only outline, which is another shape, enters a fillet's score).
+When sim time goes back (/clock or the depth stamps; a replay started again,
+a restarted camera or line) the background is relearned and every track
+dropped, with one log line, so a second pass is segmented like the first.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from woody_common.stamps import stamp_to_seconds
 from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 from woody_vision import segmentation
 from woody_vision.camera_model import LaneLayout
-from woody_vision.frame_checks import FrameChecker, FrameError
+from woody_vision.frame_checks import FrameChecker, FrameError, SimTimeWatch, watch_clock
 from woody_vision.image_encodings import color_rgb, depth_metres, match_size
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.segmentation import DEFAULT_HEIGHT_THRESHOLD_M, BackgroundModel, SegmentationParams, segment_depth
@@ -78,6 +81,8 @@ class Segmenter(Node):
         self.tracker_options = dict(max_distance_px=max_distance, max_unseen=max_unseen)
         self.tracker: CentroidTracker | None = None
         self.checker = FrameChecker(self.get_logger())
+        self.sim_time = SimTimeWatch()
+        self.clock_jumps = watch_clock(self, self.sim_time, self.restart)
         self.latest_color: Image | None = None
         self.scores: dict[int, str] = {}
         self.info_size: tuple[int, int] | None = None
@@ -115,6 +120,9 @@ class Segmenter(Node):
         self.get_logger().info("background reset: relearning from the next frames")
 
     def on_color(self, msg: Image) -> None:
+        stamp = stamp_to_seconds(msg.header.stamp)
+        if self.sim_time.went_back("color", stamp):  # colour comes before its depth frame: forget before keeping it
+            self.restart(f"{topics.TOP_COLOR_IMAGE} stamp went back to {stamp:.2f} s")
         self.latest_color = msg
         if not self.params.color_threshold:
             return
@@ -134,6 +142,9 @@ class Segmenter(Node):
 
     def on_depth(self, msg: Image) -> None:
         self.frames += 1
+        stamp = stamp_to_seconds(msg.header.stamp)
+        if self.sim_time.went_back("depth", stamp):
+            self.restart(f"{topics.TOP_DEPTH_IMAGE} stamp went back to {stamp:.2f} s")
         try:
             depth = depth_metres(msg)
             self.checker.check(msg, depth.shape)
@@ -142,17 +153,25 @@ class Segmenter(Node):
             self.checker.reject(str(exc))
             return
         if self.checker.restarted:
-            self.get_logger().warning("camera restarted (stamp went back or the size changed): relearning background")
-            self.background.reset()
-            self.pending = None
-            if self.tracker is not None:
-                self.tracker.reset()
+            self.restart(f"the depth image size changed to {msg.width}x{msg.height}")
         if self.params.color_threshold and _stamp_key(msg) not in self.colors:
             if self.pending is not None:  # its colour frame never came: skipped
                 self._segment(*self.pending)
             self.pending = (msg, depth)
             return
         self._segment(msg, depth)
+
+    def restart(self, why: str) -> None:
+        """The camera restarted or sim time went back: relearn the background, drop every track and held frame."""
+        self.background.reset()
+        self.checker.reset()
+        self.pending = None
+        self.colors.clear()
+        self.scores.clear()
+        if self.tracker is not None:
+            self.tracker.reset()
+        self.get_logger().warning(f"camera restarted or sim time went back ({why}): relearning the background, "
+                                  "tracks start over")
 
     def _segment(self, msg: Image, depth: np.ndarray) -> None:
         """Segment and track one depth frame (with its colour frame, when the outline comes from colour)."""

@@ -19,11 +19,17 @@ the leading edge is the contour's max v, the trailing edge its min v):
    "Hu Mo. Score" and "Sol. Diff." columns, each term's own maximum;
 4. the window closes on the first frame where the virtual centroid (trailing
    edge + locked offset) is at or past the edge; that frame is scored too.
-   If that frame is more than ``LATE_CLOSE_FRAMES`` frames of the fillet's own
+   If that frame is more than ``GAP_FRAMES`` frames of the fillet's own
    approach speed past the point (frames lost in a burst around the edge, a
    real camera's or network's dropped frames), it shows a fillet already
    falling off and would score it far too high: the result is unscored
-   instead of wrong.
+   instead of wrong. Frames lost inside the window are found by stamp: a step
+   between the fillet's sightings of more than ``GAP_FRAMES`` frame intervals
+   (the approach's shortest step) into a window frame means Φ is a maximum over
+   part of the window, so Φ and its terms are absent (NaN) with the reason, and
+   a grader on the paper's Φ leaves the fillet unscored. Φ is only ever the
+   maximum over a complete window: a window that did not close cleanly
+   leaves it absent too.
 
 Why the cut is fixed by the reference and not re-found per frame (as the seed
 system does): the segmenter thresholds height above the empty scene, and past
@@ -73,6 +79,8 @@ from enum import Enum
 import cv2
 import numpy as np
 
+from woody_vision.frame_checks import GAP_FRAMES, frame_interval, is_gap
+
 W1 = 100.0
 """Weight of the Hu-moment term (paper)."""
 W2 = 100.0
@@ -88,6 +96,7 @@ REASON_LOST_BEFORE_EDGE = "track ended before its body reached the roller edge"
 REASON_LOST_IN_WINDOW = "track ended before the evaluation window closed"
 REASON_DEGENERATE = "degenerate reference contour"
 REASON_LATE_CLOSE = "frames lost at the roller edge: the window closed {:.0f} px past the fillet's centroid"
+REASON_WINDOW_GAP = "phi absent: frames lost in the evaluation window ({:.3f} s without a frame of this fillet)"
 REASON_LINE_GAP = ("no clean frames around the measuring point (overhang {:.2f} L): frames lost or merged with a "
                    "neighbour ({} rejected)")
 LINE_OVERHANG_FRACTION = 0.5
@@ -104,9 +113,6 @@ LEADING_NARROW = "narrow"
 LEADING_BLUNT = "blunt"
 FLAT_HISTORY = 8
 """Flat outlines kept to choose an unmerged reference from."""
-LATE_CLOSE_FRAMES = 2.5
-"""How far (in frames of the fillet's approach speed) the closing frame may lie past the centroid crossing.
-With every frame it is under one frame; a lost frame or two stays within this."""
 
 
 def fill_rows(contour: np.ndarray) -> tuple[np.ndarray, int, int]:
@@ -225,14 +231,14 @@ class ShapeResult:
     status: str
     """'scored' or 'unscored'."""
     reason: str
-    """Why it is unscored ('' when scored)."""
+    """Why it is unscored, or why ``phi`` is absent when it is scored on ``line_phi`` ('' otherwise)."""
     phi: float
-    """Max Φ_t over the window (NaN if no frame was scored)."""
+    """Max Φ_t over the complete window (NaN unless the window closed cleanly without a gap)."""
     hu_term: float
-    """Max over the window of D/AR, its own maximum (paper's "Hu Mo. Score"; not necessarily at the max-Φ frame,
-    so Φ ≤ w1·hu_term + w2·solidity_term)."""
+    """Max over the complete window of D/AR, its own maximum (paper's "Hu Mo. Score"; not necessarily at the
+    max-Φ frame, so Φ ≤ w1·hu_term + w2·solidity_term)."""
     solidity_term: float
-    """Max over the window of |S_ref − S_cur|, its own maximum (paper's "Sol. Diff.")."""
+    """Max over the complete window of |S_ref − S_cur|, its own maximum (paper's "Sol. Diff."); NaN like ``phi``."""
     frames: int
     """Frames scored in the window."""
     stamp: float | None
@@ -267,7 +273,7 @@ class ShapeResult:
     extra_trace: tuple[FrameScore, ...] = ()
     """Frames scored after the window closed, up to the measuring point."""
     window_closed: bool = False
-    """Whether the paper's window closed cleanly, so that ``phi`` is the paper's Φ."""
+    """Whether the paper's window closed cleanly and without a gap, so that ``phi`` is the paper's Φ."""
 
 
 def leading_end(contour: np.ndarray) -> str:
@@ -357,6 +363,10 @@ class ShapeEvaluator:
         self._last_trailing: int | None = None
         self._rejected = 0
         self._last_stamp: float | None = None
+        self._step = 0.0
+        """Time since the previous sighting of this fillet (s)."""
+        self._window_gap = 0.0
+        """The longest step into a window frame that was a gap (s; 0 without one)."""
         self._sightings = 0
         self._approach: list[tuple[float, float]] = []
         """(stamp, leading row) of the flat frames: the fillet's own speed and frame interval in the image."""
@@ -386,6 +396,7 @@ class ShapeEvaluator:
         """Feed this frame's full contour; returns the result on the frame it is decided."""
         if self._phase is _Phase.DONE:
             return None
+        self._step = stamp - self._last_stamp if self._last_stamp is not None else 0.0
         self._last_stamp = stamp
         self._sightings += 1
         points = np.asarray(contour, dtype=np.int32).reshape(-1, 2)
@@ -422,22 +433,31 @@ class ShapeEvaluator:
         trailing = int(points[:, 1].min())
         if self._merged(points, trailing):
             self._rejected += 1
+            if self._trace and not self._closed:
+                self._note_gap()
             return None
         self._last_trailing = trailing
         if trailing + reference.length_px < self.edge_row:
             return None  # the rigid body front has not reached the edge yet: the window is not open
+        if not self._closed:
+            self._note_gap()
         overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
         frame = self._score(clip_body(points, trailing, reference.length_px), stamp, overhang)
         (self._extra if self._closed else self._trace).append(frame)
         self._contours.append(points)
         if not self._closed:
             overshoot = trailing + reference.centroid_offset_px - self.edge_row
-            if overshoot >= 0.0 and overshoot > LATE_CLOSE_FRAMES * self._advance_per_frame():
+            if overshoot >= 0.0 and overshoot > GAP_FRAMES * self._advance_per_frame():
                 return self._finish(STATUS_UNSCORED, REASON_LATE_CLOSE.format(overshoot))
             self._closed = overshoot >= 0.0
         if self._closed and overhang >= self.line_fraction:
             return self._finish_line()
         return None
+
+    def _note_gap(self) -> None:
+        """Remember the step into this window frame if frames were lost before it."""
+        if is_gap(self._step, frame_interval([stamp for stamp, _ in self._approach])):
+            self._window_gap = max(self._window_gap, self._step)
 
     def _merged(self, points: np.ndarray, trailing: int) -> bool:
         """Whether this window frame's blob has grown into a neighbour's (see the module doc)."""
@@ -453,20 +473,16 @@ class ShapeEvaluator:
         frames = self._trace + self._extra
         line_phi, nearer, gap = interpolate_at(frames, self.line_fraction)
         step = self._advance_per_frame() / self._reference.length_px
-        if nearer is None or not math.isfinite(line_phi) or gap > LATE_CLOSE_FRAMES * step:
+        if nearer is None or not math.isfinite(line_phi) or is_gap(gap, step):
             return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
-        return self._finish(STATUS_SCORED, "", line_phi, self._contours[nearer], frames[nearer].stamp)
+        reason = REASON_WINDOW_GAP.format(self._window_gap) if self._window_gap else ""
+        return self._finish(STATUS_SCORED, reason, line_phi, self._contours[nearer], frames[nearer].stamp)
 
     def _advance_per_frame(self) -> float:
         """Rows the fillet moved per camera frame while flat (inf when too few frames tell)."""
-        if len(self._approach) < 2:
-            return math.inf
-        stamps, rows = np.array(self._approach).T
-        steps = np.diff(stamps)
-        steps = steps[steps > 0]
-        if not steps.size or stamps[-1] <= stamps[0]:
-            return math.inf
-        return float(self._speed_px_s() * steps.min())
+        interval = frame_interval([stamp for stamp, _ in self._approach])
+        speed = self._speed_px_s()
+        return float(speed * interval) if math.isfinite(interval) and math.isfinite(speed) else math.inf
 
     def _speed_px_s(self) -> float:
         """The fillet's speed along the image rows while flat (NaN when too few frames tell)."""
@@ -495,12 +511,14 @@ class ShapeEvaluator:
                 line_contour: np.ndarray | None = None, line_stamp: float | None = None) -> ShapeResult:
         self._phase = _Phase.DONE
         referenced = self._reference is not None
+        complete = self._closed and not self._window_gap
+        window = self._trace if complete else []
         return ShapeResult(
             status=status,
             reason=reason,
-            phi=_nanmax([f.phi for f in self._trace]),
-            hu_term=_nanmax([f.hu_term for f in self._trace]),
-            solidity_term=_nanmax([f.solidity_term for f in self._trace]),
+            phi=_nanmax([f.phi for f in window]),
+            hu_term=_nanmax([f.hu_term for f in window]),
+            solidity_term=_nanmax([f.solidity_term for f in window]),
             frames=len(self._trace),
             stamp=self._last_stamp,
             aspect_ratio=self._reference.aspect_ratio if referenced else math.nan,
@@ -517,7 +535,7 @@ class ShapeEvaluator:
             line_contour=line_contour,
             line_stamp=line_stamp,
             extra_trace=tuple(self._extra),
-            window_closed=self._closed,
+            window_closed=complete,
         )
 
 

@@ -11,6 +11,16 @@ thinning) in the silhouette's principal-axis frame, with P the contour
 perimeter and L the fitted parabola's arc length, kept as the maximum over the
 frames from that trigger on (the bend over the roller; flat frames have
 κ ≈ 0 and cannot hold the maximum).
+
+Only a whole passage is measured. The tracker finds lost frames by stamp: a
+step of more than ``GAP_FRAMES`` frame intervals (the stream's shortest step,
+the side camera's rate while a fillet is in view) between any two frames from
+a passage's first to the frame that ends it means the minimum, h or BE may lie
+in the frames that never came (a grader that fell behind, a network burst).
+Such a passage gives a measurement with NMDM, MDM and BE absent (NaN) and the
+reason, never the values of the frames that were seen. The step into a
+passage's first frame does not count: the side camera runs slower while its
+view is empty.
 """
 
 from __future__ import annotations
@@ -21,6 +31,8 @@ from dataclasses import dataclass
 import cv2
 import numba
 import numpy as np
+
+from woody_vision.frame_checks import is_gap
 
 DEFAULT_DIFF_THRESHOLD = 40
 """Summed |RGB − background| above which a pixel belongs to a fillet."""
@@ -46,6 +58,15 @@ class SideMeasurement:
     first_stamp: float
     last_stamp: float
     frames: int
+    reason: str = ""
+    """Why NMDM, MDM and BE are absent (NaN): frames of the passage were lost; '' for a whole passage."""
+
+    @property
+    def complete(self) -> bool:
+        return not self.reason
+
+
+REASON_SIDE_GAP = "side view absent: frames lost in the passage ({:.3f} s between frames, {:.3f} s expected)"
 
 
 def silhouette(rgb: np.ndarray, background: np.ndarray, threshold: int = DEFAULT_DIFF_THRESHOLD) -> np.ndarray:
@@ -253,6 +274,8 @@ class _Passage:
     be: float = math.nan
     approached: bool = False
     """Seen with its leading edge short of the h trigger, so the trigger frame is a real crossing."""
+    longest_step: float = 0.0
+    """The longest step between frames (s) from the passage's first frame to its last."""
 
 
 class SidePassageTracker:
@@ -273,14 +296,21 @@ class SidePassageTracker:
         self._given_background = background
         self.background = background
         self._passages: list[_Passage] = []
+        self._last_stamp: float | None = None
+        self.interval = math.inf
+        """The stream's frame interval: its shortest step between frames so far (s)."""
 
     def reset(self) -> None:
-        """Forget passages and relearn the background from the next frame (unless one was given)."""
+        """Forget passages and the stream's stamps, and relearn the background from the next frame (unless one
+        was given)."""
         self.background = self._given_background
         self._passages = []
+        self._last_stamp = None
+        self.interval = math.inf
 
     def update(self, rgb: np.ndarray, stamp: float) -> list[SideMeasurement]:
         """Feed one side frame; returns the measurements of passages that ended with it."""
+        self._note_step(stamp)
         if self.background is None or self.background.shape != rgb.shape:
             self.background = rgb.copy()
             self._passages = []
@@ -303,6 +333,15 @@ class SidePassageTracker:
         self._passages = [p for p in self._passages if p.unseen < self.end_frames]
         return [m for m in (self._measure(p) for p in done) if m is not None]
 
+    def _note_step(self, stamp: float) -> None:
+        """Learn the frame interval and charge the step since the last frame to every passage in progress."""
+        step = stamp - self._last_stamp if self._last_stamp is not None else 0.0
+        self._last_stamp = stamp
+        if step > 0.0:
+            self.interval = min(self.interval, step)
+        for passage in self._passages:
+            passage.longest_step = max(passage.longest_step, step)
+
     def _observe(self, passage: _Passage, own: np.ndarray, stat: np.ndarray, centroid: np.ndarray,
                  stamp: float) -> None:
         """``own``: the blob's pixels within its bounding box ``stat`` (frame coordinates)."""
@@ -324,6 +363,12 @@ class SidePassageTracker:
     def _measure(self, passage: _Passage) -> SideMeasurement | None:
         if not math.isfinite(passage.h_px) or passage.h_px <= 0.0:
             return None  # never seen reaching the roller (entered mid-fall, or a speck): no reliable h
+        if is_gap(passage.longest_step, self.interval):
+            nan = math.nan
+            return SideMeasurement(nmdm=nan, mdm_min_px=nan, be=nan, h_px=nan, stamp_of_min=nan,
+                                   first_stamp=passage.first_stamp, last_stamp=passage.last_stamp,
+                                   frames=passage.frames,
+                                   reason=REASON_SIDE_GAP.format(passage.longest_step, self.interval))
         return SideMeasurement(nmdm=nmdm(passage.min_mdm, self.radius, passage.h_px), mdm_min_px=passage.min_mdm,
                                be=passage.be, h_px=passage.h_px, stamp_of_min=passage.stamp_of_min,
                                first_stamp=passage.first_stamp, last_stamp=passage.last_stamp, frames=passage.frames)
