@@ -20,7 +20,10 @@ The options and exit codes are `woody_tools.commands.replay`'s. Behaviour:
 - ``--loop`` starts over after the last message (sim time then jumps back).
 - Into a running graph: topics that live nodes already publish (found in the
   first ``--discovery`` seconds) are skipped with one warning line, so the
-  graph's outputs are not doubled (``--keep-live`` plays them anyway);
+  graph's outputs are not doubled (``--keep-live`` plays them anyway). The
+  player keeps looking every ``LIVE_CHECK_S`` during playback: when a live node
+  starts publishing a topic it replays (a grader started after the replay),
+  it stops replaying that topic, /clock included, with one line.
   ``--exclude`` drops topics by name; ``--namespace NS`` plays under NS.
 """
 
@@ -39,6 +42,8 @@ from woody_bag.schemas import message_class, message_definition
 from woody_common.stamps import nanoseconds_to_stamp
 
 CLOCK = "/clock"
+LIVE_CHECK_S = 0.1
+"""How often playback looks for live publishers of the topics it replays (s of wall time)."""
 
 
 class Stop:
@@ -99,25 +104,37 @@ def playable_types(args: argparse.Namespace, path, in_bag: dict[str, dict]) -> d
     return types
 
 
+def live_publishers(node, topics, namespace: str) -> dict[str, list[str]]:
+    """{topic: names of the other nodes publishing it} for the recorded ``topics`` that live nodes publish."""
+    own = (node.get_name(), node.get_namespace())
+    live = {}
+    for topic in topics:
+        nodes = sorted({i.node_name for i in node.get_publishers_info_by_topic(moved(topic, namespace))
+                        if (i.node_name, i.node_namespace) != own})
+        if nodes:
+            live[topic] = nodes
+    return live
+
+
+def live_text(live: dict[str, list[str]]) -> str:
+    return ", ".join(f"{t} (by {' '.join(n)})" for t, n in live.items())
+
+
 def skip_live(node, args, types: dict[str, type], clock_mode: str | None, stop: Stop) -> str | None:
     """Drop from ``types`` the topics live nodes already publish; the clock mode left (None if /clock is live).
 
     Replaying a bag's tracks or verdicts into a running graph would double its
     outputs (and a second /clock would fight the live one), so those topics are
     skipped with one warning line naming the nodes; ``--keep-live`` plays them anyway.
+    The player keeps looking during playback (`Player`): a node that comes up later stops its topics there.
     """
     _discover(node, args.discovery, stop)
-    topics = [*types, *([CLOCK] if clock_mode else [])]
-    live = {}
-    for topic in topics:
-        nodes = sorted({i.node_name for i in node.get_publishers_info_by_topic(moved(topic, args.namespace))})
-        if nodes:
-            live[topic] = nodes
+    live = live_publishers(node, [*types, *([CLOCK] if clock_mode else [])], args.namespace)
     for topic in live:
         types.pop(topic, None)
     if live:
-        print("replay: not replaying topics live nodes publish (--keep-live plays them anyway): "
-              + ", ".join(f"{t} (by {' '.join(n)})" for t, n in live.items()), file=sys.stderr, flush=True)
+        print("replay: not replaying topics live nodes publish (--keep-live plays them anyway): " + live_text(live),
+              file=sys.stderr, flush=True)
     return None if CLOCK in live else clock_mode
 
 
@@ -161,6 +178,7 @@ class Player:
         self.topics = list(types) + ([CLOCK] if clock_mode == "recorded" else [])
         self.count = 0
         self.bag_seconds = 0.0
+        self._next_live_check = 0.0
 
     def say(self, text: str) -> None:
         if not self.args.quiet:
@@ -185,17 +203,37 @@ class Player:
             self.say(f"no subscriber after {limit:g} s on {' '.join(lonely)}; playing anyway")
 
     def _publish_clock(self, bag_ns: int) -> None:
-        if bag_ns <= self._last_clock:
+        if bag_ns <= self._last_clock or self.clock_publisher is None:
             return
         self._last_clock = bag_ns
         self._clock_msg.clock = nanoseconds_to_stamp(bag_ns)
         self.clock_publisher.publish(self._clock_msg)
+
+    def _check_live(self, bag_s: float) -> None:
+        """Stop replaying the topics a live node has started to publish (checked every `LIVE_CHECK_S`), with one
+        line: replaying beside a live grader would double its verdicts."""
+        if self.args.keep_live or time.monotonic() < self._next_live_check:
+            return
+        self._next_live_check = time.monotonic() + LIVE_CHECK_S
+        replayed = [*self.publishers, *([CLOCK] if self.clock_publisher is not None else [])]
+        live = live_publishers(self.node, replayed, self.args.namespace)
+        if not live:
+            return
+        for topic in live:
+            if topic == CLOCK:
+                self.node.destroy_publisher(self.clock_publisher)
+                self.clock_publisher, self.clock_mode = None, None
+            else:
+                self.node.destroy_publisher(self.publishers.pop(topic))
+        print(f"replay: live nodes publish {live_text(live)}: not replayed from t={bag_s:.3f}s of the bag on",
+              file=sys.stderr, flush=True)
 
     def _wait_until(self, target: float, t0_wall: float, t0_bag: int, next_bag: int) -> None:
         synth = self.clock_mode == "synthesised"
         period = 1.0 / self.args.clock_rate
         while not self.stop:
             now = time.monotonic()
+            self._check_live((now - t0_wall) * self.args.rate)
             if synth:
                 self._publish_clock(min(next_bag, t0_bag + int((now - t0_wall) * self.args.rate * 1e9)))
             remaining = target - now
@@ -248,12 +286,12 @@ class Player:
                 self._wait_until(target, t0_wall, t0_bag, log_time)
                 if self.stop:
                     break
-                if topic == CLOCK:
-                    self.clock_publisher.publish(data)
-                else:
-                    if self.clock_mode == "synthesised":
-                        self._publish_clock(log_time)
-                    self.publishers[topic].publish(data)
+                publisher = self.clock_publisher if topic == CLOCK else self.publishers.get(topic)
+                if publisher is None:
+                    continue  # a live node publishes it now
+                if topic != CLOCK and self.clock_mode == "synthesised":
+                    self._publish_clock(log_time)
+                publisher.publish(data)
                 played += 1
                 self.count += 1
                 if time.monotonic() >= next_progress:

@@ -12,7 +12,9 @@ Parameters (``--ros-args -p name:=value``):
   ``/rosout``, ``/parameter_events`` and hidden (``/_...``) topics.
 - ``discovery_period`` (s, 0.5): how often the graph is searched for new topics
   during the whole run.
-- ``queue_depth`` (100): keep-last depth of the subscriptions (per topic).
+- ``queue_depth`` (1000): keep-last depth of the subscriptions (per topic): what the
+  middleware holds for the recorder while its Python thread waits for a CPU (at 100,
+  a 3-lane line beside two busy processes loses hundreds of messages).
 - ``compression`` (``zstd``|``lz4``|``none``), ``compression_level`` (zstd
   level, 1), ``chunk_size`` (bytes, 4 MiB), ``flush_period`` (s, 1.0: the
   longest a message waits in memory before its chunk is written; what a
@@ -40,19 +42,29 @@ adaptive rule): reliable unless some publisher is best-effort, transient-local
 keep-last ``queue_depth``. The offered profiles are stored in the channel's
 ``offered_qos_profiles`` metadata.
 
-Per message, the subscription callback only queues the serialized bytes; a
+A subscription callback takes the subscription's whole backlog (one executor
+round per burst, not per message) and only queues the serialized bytes; a
 writer thread builds, compresses (zstd releases the GIL) and writes chunks, so
 compression and disk I/O use the second core. SIGINT/SIGTERM finish the file
 (summary and indexes) and log one line: messages, MB on disk (compressed), and per
 topic written/published (``/?`` when several publishers share it), naming what was
-lost in transport; exit code 0. A bad
+lost in transport (a gap in the publisher's sequence numbers); the losses per topic
+are also the bag's ``woody.losses`` metadata record (`woody_bag.summary.LOSSES_RECORD`),
+which ``woody bag info``, ``woody run`` and its report.md show; exit code 0. A bad
 parameter or an unwritable output: one error line, exit code 2.
+
+A full disk or a file size limit (ENOSPC, EFBIG, handled alike; SIGXFSZ is
+ignored) stops the recording: the file is cut back to its last whole record, one
+error line (starting ``stopped recording:``) names the cause, the path and the
+``woody bag recover`` command that writes a complete copy, exit code 1.
 """
 
 from __future__ import annotations
 
 import collections
+import errno
 import re
+import signal
 import sys
 import threading
 import time
@@ -68,18 +80,17 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from woody_bag.errors import BagError
 from woody_bag.qos import qos_profiles_yaml
 from woody_bag.schemas import message_class, message_definition
+from woody_bag.summary import LOSSES_RECORD, losses_record
 from woody_bag.writer import BagWriter
 from woody_common.ros_params import check_overrides, run_node, usage
 
 DEFAULT_EXCLUDE = r"^/(rosout|parameter_events)$|/_"
+FAILURE_PREFIX = "stopped recording:"
+"""Begins the recorder's one error line when the bag cannot be written (full disk, file size limit)."""
 
 
 class ConfigError(ValueError):
     """A parameter the recorder cannot work with; the message is one line."""
-
-
-class _Failure(Exception):
-    """The writer thread failed (e.g. disk full)."""
 
 
 class Recorder(Node):
@@ -152,7 +163,7 @@ class Recorder(Node):
         self.declare_parameter("topic_regex", "", desc("also record topics matching this regex", S))
         self.declare_parameter("exclude_regex", DEFAULT_EXCLUDE, desc("never record topics matching this", S))
         self.declare_parameter("discovery_period", 0.5, desc("seconds between searches for new topics", D))
-        self.declare_parameter("queue_depth", 100, desc("keep-last depth of each subscription", INT))
+        self.declare_parameter("queue_depth", 1000, desc("keep-last depth of each subscription", INT))
         self.declare_parameter("compression", "zstd", desc("chunk compression: zstd, lz4 or none", S))
         self.declare_parameter("compression_level", 1, desc("zstd level (1 keeps up with 200 Hz images)", INT))
         self.declare_parameter("chunk_size", 4 * 1024 * 1024, desc("bytes per MCAP chunk", INT))
@@ -182,8 +193,6 @@ class Recorder(Node):
         return not (self._exclude and self._exclude.search(topic))
 
     def _discover(self) -> None:
-        if self._error is not None:
-            raise _Failure(str(self._error))
         for topic, types in self.get_topic_names_and_types():
             if topic in self._ignored or not self._wanted(topic):
                 continue
@@ -217,19 +226,31 @@ class Recorder(Node):
 
     def _subscribe(self, topic: str, type_name: str, msg_type: type, publishers) -> None:
         qos = self._qos(publishers)
-        self._enqueue((topic, None, type_name, qos_profiles_yaml(p.qos_profile for p in publishers)), 0)
+        self._enqueue((topic, None, type_name, qos_profiles_yaml(p.qos_profile for p in publishers), 0), 0)
         enqueue, time_ns = self._enqueue, time.time_ns
         seen = self._seen[topic] = [None, 0, 0, len(publishers)]
 
-        def on_message(data: bytes, info: dict) -> None:
+        def keep(data: bytes, info: dict) -> None:
             sequence = info.get("publication_sequence_number")
             if sequence:
                 seen[0] = sequence if seen[0] is None else min(seen[0], sequence)
                 seen[1] = max(seen[1], sequence)
             seen[2] += 1
-            enqueue((topic, data, info["received_timestamp"] or time_ns(), info["source_timestamp"]), len(data))
+            enqueue((topic, data, info["received_timestamp"] or time_ns(), info["source_timestamp"], sequence or 0),
+                    len(data))
 
-        self._subscriptions_by_topic[topic] = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
+        def on_message(data: bytes, info: dict) -> None:
+            keep(data, info)
+            handle = subscription.handle
+            while True:  # take the whole backlog now: one executor round per burst, not per message
+                with handle:
+                    taken = handle.take_message(msg_type, True)
+                if taken is None:
+                    return
+                keep(*taken)
+
+        subscription = self.create_subscription(msg_type, topic, on_message, qos, raw=True)
+        self._subscriptions_by_topic[topic] = subscription
         self._offered[topic] = len(publishers)
         self.get_logger().info(
             f"recording {topic} [{type_name}] {qos.reliability.name.lower()} {qos.durability.name.lower()}")
@@ -273,11 +294,11 @@ class Recorder(Node):
                     batch, self._items = self._items, collections.deque()
                     stopping = self._stopping
                 size = 0
-                for topic, data, a, b in batch:
+                for topic, data, a, b, sequence in batch:
                     if data is None:
                         writer.add_topic(topic, a, b)
                     else:
-                        writer.write(topic, data, a, b)
+                        writer.write(topic, data, a, b, sequence & 0xFFFFFFFF)
                         size += len(data)
                 if size:
                     with self._cond:
@@ -294,20 +315,20 @@ class Recorder(Node):
                 self._cond.notify_all()
 
     def spin(self, stop: threading.Event) -> int:
-        """Record until ``stop`` is set, then take what the middleware still holds; 1 if writing failed."""
+        """Record until ``stop`` is set, then take what the middleware still holds; 1 if writing failed (the bag
+        stays as far as it was written)."""
         executor = SingleThreadedExecutor(context=self.context)
         executor.add_node(self)
         try:
-            while not stop.is_set() and rclpy.ok():
+            while not stop.is_set() and rclpy.ok() and self._error is None:
                 executor.spin_once(timeout_sec=0.1)
-            self.drain(executor)
-        except _Failure:
-            return 1
+            if self._error is None:
+                self.drain(executor)
         except ExternalShutdownException:
             pass
         finally:
             executor.remove_node(self)
-        return 0
+        return 0 if self._error is None else 1
 
     def drain(self, executor, quiet_s: float = 0.3, limit_s: float = 5.0) -> None:
         """Take what the middleware still holds for us before closing: a recorder lagging behind a busy
@@ -330,30 +351,30 @@ class Recorder(Node):
             result[topic] = (self._writer.counts.get(topic, 0), published)
         return result
 
-
     def close(self) -> int:
-        """Drain the queue, finish the file, log one summary line; 0 if the bag is complete, else 1."""
+        """Drain the queue, finish the file with its losses record, log one summary line; 0 if the bag is
+        complete, else 1 with one error line (a full disk: what to run to read the bag)."""
         with self._cond:
             self._stopping = True
             self._cond.notify_all()
         self._thread.join()
-        code = 0
-        if self._error is not None:
-            self.get_logger().error(f"writing {self.output} failed: {self._error}")
-            code = 1
         duration = time.monotonic() - self._start
         counts, drops = self._writer.counts, self.drops()
         total = sum(counts.values())
-        try:
-            self._writer.add_metadata("woody.recorder", {
-                "duration_s": f"{duration:.3f}", "messages": str(total),
-                "counts": ",".join(f"{t}={n}" for t, n in sorted(counts.items())),
-                "written/published": ",".join(f"{t}={_drop_text(*d)}" for t, d in drops.items())})
-            self._writer.close()
-            size = self.output.stat().st_size
-        except Exception as exc:  # noqa: BLE001
-            self.get_logger().error(f"finishing {self.output} failed: {exc}")
+        if self._error is None:
+            try:
+                self._writer.add_metadata("woody.recorder", {
+                    "duration_s": f"{duration:.3f}", "messages": str(total),
+                    "counts": ",".join(f"{t}={n}" for t, n in sorted(counts.items())),
+                    "written/published": ",".join(f"{t}={_drop_text(*d)}" for t, d in drops.items())})
+                self._writer.add_metadata(LOSSES_RECORD, losses_record(drops))
+                self._writer.close()
+            except Exception as exc:  # noqa: BLE001 - reported in one line below
+                self._error = exc
+        if self._error is not None:
+            self.get_logger().error(self._failure_line())
             return 1
+        size = self.output.stat().st_size
         missing = sorted(self._topics - set(counts))
         lost = sum(max(0, p - w) for w, p in drops.values() if p is not None)
         self.get_logger().info(
@@ -361,7 +382,18 @@ class Recorder(Node):
             f"{lost} lost in transport; written/published per topic: "
             + (", ".join(f"{t} {_drop_text(*d)}" for t, d in drops.items()) or "nothing")
             + (f"; never seen: {', '.join(missing)}" if missing else ""))
-        return code
+        return 0
+
+    def _failure_line(self) -> str:
+        """The one line naming why the bag could not be written, where, and how to read what it holds."""
+        exc = self._error
+        received = sum(seen[2] for seen in self._seen.values())
+        size = self.output.stat().st_size / 1e6 if self.output.exists() else 0.0
+        cause = (f"{exc.strerror} ({errno.errorcode[exc.errno]})" if isinstance(exc, OSError) and exc.errno
+                 in errno.errorcode else f"{type(exc).__name__}: {exc}".replace("\n", " "))
+        return (f"{FAILURE_PREFIX} {self.output}: {cause}; stopped after {received} messages received, "
+                f"{size:.1f} MB on disk; the bag is readable up to its last complete chunk: "
+                f"`woody bag recover {self.output} OUT.mcap` writes it complete (OUT on a disk with space)")
 
 
 def _drop_text(written: int, published: int | None) -> str:
@@ -372,6 +404,7 @@ def _drop_text(written: int, published: int | None) -> str:
 
 def main(args: list[str] | None = None) -> int:
     """Record until SIGINT/SIGTERM, then finish the bag. Exit code 0, 2 on bad parameters, 1 on write errors."""
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a file size limit is EFBIG, reported like a full disk
     help_text = usage("recorder").splitlines()[0] + "\n" + __doc__.split("\n\n", 1)[1].split("\n\nTiming")[0]
     return run_node("recorder", Recorder, args, help_text=help_text)
 

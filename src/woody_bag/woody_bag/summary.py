@@ -98,3 +98,37 @@ def _schema_text(schema: Schema | None) -> str:
 def bag_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
     """The bag's metadata records, e.g. ``{"woody": {...run info...}}``."""
     return bag_summary(path)["metadata"]
+
+
+LOSSES_RECORD = "woody.losses"
+"""The recorder's metadata record of messages lost in transport: ``total``, ``unmeasured`` (topics whose
+publishers gave no usable sequence numbers) and the count of every topic that lost some."""
+
+
+def losses_record(drops: dict[str, tuple[int, int | None]]) -> dict[str, str]:
+    """The `LOSSES_RECORD` of the recorder's per-topic (written, published) counts."""
+    lost = {topic: published - written for topic, (written, published) in drops.items()
+            if published is not None and published > written}
+    unmeasured = sorted(topic for topic, (_written, published) in drops.items() if published is None)
+    return {"total": str(sum(lost.values())), "unmeasured": ",".join(unmeasured),
+            **{topic: str(n) for topic, n in sorted(lost.items())}}
+
+
+def recorded_losses(metadata: dict[str, dict[str, str]]) -> dict[str, int] | None:
+    """{topic: messages lost in transport} of a bag's metadata (empty: none lost); None when the recorder did not
+    finish the bag (no `LOSSES_RECORD`)."""
+    record = metadata.get(LOSSES_RECORD)
+    if record is None:
+        return None
+    return {topic: int(n) for topic, n in record.items() if topic.startswith("/")}
+
+
+def losses_text(losses: dict[str, int] | None) -> str:
+    """``"none lost in transport"``, ``"19 lost in transport (/clock 13, ...)"`` or, for a bag without
+    `LOSSES_RECORD` (its recorder did not finish it, or another recorder wrote it), that they are not recorded."""
+    if losses is None:
+        return "losses in transport not recorded"
+    if not losses:
+        return "none lost in transport"
+    return (f"{sum(losses.values())} lost in transport ("
+            + ", ".join(f"{t} {n}" for t, n in sorted(losses.items(), key=lambda item: -item[1])) + ")")

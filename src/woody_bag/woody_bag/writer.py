@@ -70,11 +70,18 @@ class _UnbufferedFile:
         self._pos = 0
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
+        """Write one record whole; on an error (a full disk, a file size limit) cut the file back to the end of
+        the last whole record, so the file holds no half record and the space of the partial write is free."""
         view = memoryview(data)
         total = len(view)
-        while view:
-            written = os.write(self._fd, view)
-            view = view[written:]
+        try:
+            while view:
+                written = os.write(self._fd, view)
+                view = view[written:]
+        except OSError:
+            os.ftruncate(self._fd, self._pos)
+            os.lseek(self._fd, self._pos, os.SEEK_SET)
+            raise
         self._pos += total
         return total
 
@@ -123,7 +130,6 @@ class BagWriter:
             raise BagError(f"{self.path}: cannot create bag: {exc.strerror or exc}") from None
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=_COMPRESSION[compression],
                               index_types=IndexType.ALL)
-        self._writer.start(profile="ros2", library=LIBRARY)
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._types: dict[str, str] = {}
@@ -133,7 +139,12 @@ class BagWriter:
         self._closed = False
         info = {"library": LIBRARY, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         info.update({k: v if isinstance(v, str) else json.dumps(v) for k, v in (metadata or {}).items()})
-        self.add_metadata("woody", info)
+        try:
+            self._writer.start(profile="ros2", library=LIBRARY)
+            self.add_metadata("woody", info)
+        except OSError as exc:  # e.g. a full disk: nothing useful was written
+            self._file.close()
+            raise BagError(f"{self.path}: cannot write bag: {exc.strerror or exc}") from None
 
     # ------------------------------------------------------------------ topics and messages
     def add_topic(self, topic: str, type_name: str, qos_profile_yaml: str = "", definition: bytes | None = None) -> int:

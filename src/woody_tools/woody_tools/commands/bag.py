@@ -7,7 +7,7 @@ import sys
 
 from woody_bag.errors import BagError
 from woody_bag.recovery import recover_bag
-from woody_bag.summary import bag_summary
+from woody_bag.summary import bag_summary, losses_text, recorded_losses
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,7 +24,8 @@ def info_lines(summary: dict) -> list[str]:
     """The lines `woody bag info` prints for a `bag_summary`."""
     state = "complete" if summary["complete"] else "NOT FINALISED (no summary; read as a stream)"
     lines = [f"bag: {summary['path']} ({state})",
-             f"messages: {summary['message_count']} over {summary['duration_s']:.3f} s"]
+             f"messages: {summary['message_count']} over {summary['duration_s']:.3f} s, "
+             + losses_text(recorded_losses(summary["metadata"]))]
     if summary["error"]:
         lines.append(f"ends: {summary['error']}; `woody bag recover` rewrites the readable part")
     width = max((len(t) for t in summary["topics"]), default=0)
