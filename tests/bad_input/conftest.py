@@ -3,9 +3,12 @@
 API (import with ``from bad_input.conftest import ...``; the ``entry`` fixture binds the test's domain):
 
 - ``run_entry(*command, domain, timeout=60, cwd=None, env=None) -> Outcome``: run ``command[0]`` from
-  ``.venv/bin`` with the rest as arguments on ROS domain ``domain``; ``cwd`` defaults to a fresh
-  temporary folder, so nothing a refusal leaves behind goes unnoticed (see ``Outcome.cwd``).
-- ``run_entries(commands, domain, **kw) -> list[Outcome]``: the same for several commands, in parallel.
+  ``.venv/bin`` with the rest as arguments on ROS domain ``domain`` (None: ``ROS_DOMAIN_ID`` unset, as
+  for `woody run`, which leases a domain of its own), in a session of its own; ``cwd``
+  defaults to a fresh temporary folder, so nothing a refusal leaves behind goes unnoticed (see
+  ``Outcome.cwd``). A command still running after ``timeout`` s is killed with its children and has
+  ``code`` None (it was not refused).
+- ``run_entries(commands, domain, workers=4, **kw) -> list[Outcome]``: several commands, ``workers`` at a time.
 - ``Outcome``: ``code``, ``stdout``, ``stderr``, ``cwd``; ``lines`` = non-blank lines of stderr then
   stdout without pybullet's import banner.
 - ``assert_one_clear_line(outcome, program, contains="", code=2) -> str``: exit ``code``, no
@@ -17,6 +20,7 @@ API (import with ``from bad_input.conftest import ...``; the ``entry`` fixture b
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
@@ -33,7 +37,7 @@ BANNER = "pybullet build time"
 
 @dataclass(frozen=True)
 class Outcome:
-    code: int
+    code: int | None
     stdout: str
     stderr: str
     cwd: Path
@@ -44,19 +48,26 @@ class Outcome:
         return [line for line in text.splitlines() if line.strip() and not line.startswith(BANNER)]
 
 
-def run_entry(*command: str, domain: int, timeout: float = 60, cwd: Path | None = None,
+def run_entry(*command: str, domain: int | None, timeout: float = 60, cwd: Path | None = None,
               env: dict[str, str] | None = None) -> Outcome:
-    """Run an entry point to its end (killed after ``timeout`` s, which fails the test)."""
+    """Run an entry point to its end, or kill it and its children after ``timeout`` s (code None)."""
     cwd = Path(cwd) if cwd is not None else Path(tempfile.mkdtemp(prefix="bad_input_"))
-    full_env = dict(os.environ if env is None else env, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1")
-    result = subprocess.run([entry_point(command[0]), *command[1:]], capture_output=True, text=True,
-                            timeout=timeout, env=full_env, cwd=cwd, stdin=subprocess.DEVNULL)
-    return Outcome(result.returncode, result.stdout, result.stderr, cwd)
+    full_env = {k: v for k, v in (os.environ if env is None else env).items() if k != "ROS_DOMAIN_ID"}
+    full_env.update(PYTHONUNBUFFERED="1", **({} if domain is None else {"ROS_DOMAIN_ID": str(domain)}))
+    proc = subprocess.Popen([entry_point(command[0]), *command[1:]], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=full_env, cwd=cwd, stdin=subprocess.DEVNULL, start_new_session=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        stdout, stderr = proc.communicate()
+        return Outcome(None, stdout, stderr, cwd)
+    return Outcome(proc.returncode, stdout, stderr, cwd)
 
 
-def run_entries(commands, domain: int, **kw) -> list[Outcome]:
-    """Run independent commands at the same time; outcomes in the order given."""
-    with ThreadPoolExecutor(max_workers=max(1, len(commands))) as pool:
+def run_entries(commands, domain: int | None, workers: int = 4, **kw) -> list[Outcome]:
+    """Run independent commands ``workers`` at a time (2 cores: more only queue); outcomes in the order given."""
+    with ThreadPoolExecutor(max_workers=workers) as pool:
         return list(pool.map(lambda command: run_entry(*command, domain=domain, **kw), commands))
 
 
