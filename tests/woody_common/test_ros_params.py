@@ -1,14 +1,14 @@
-"""Every node's command line through the real entry points: a bad argument is one line and exit code 2.
+"""`woody_common.ros_params`: declared parameters are read-only, whole numbers are taken for decimal
+parameters (``-p line_speed_fpm:=130``) with the range still enforced, and every node stops cleanly on
+SIGINT/SIGTERM with one summary line.
 
-Covers `woody_common.ros_params` (declare, check_overrides, init_checked, run_node) as every
-node uses it: unknown names are refused with the known ones, malformed overrides and
-stray arguments never reach a traceback, untyped lists are refused, ``--help`` lists the
-parameters, and every declared parameter is read-only (they are read at start-up).
-Also: whole numbers for decimal parameters (``-p line_speed_fpm:=130``), ranges still enforced.
+Bad parameters on every node's command line (unknown names, malformed overrides, stray arguments,
+``--help``, empty lists, NaN, out of range, a runtime set) are in tests/bad_input/test_parameters.py.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 
@@ -24,54 +24,6 @@ pytestmark = pytest.mark.ros
 """Starts node entry points or `woody` as processes."""
 
 NODES = ["line_sim", "segmenter", "grader", "reject_gate", "recorder"]
-
-
-def run(domain: int, *command: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
-    return subprocess.run([entry_point(command[0]), *command[1:]], capture_output=True, text=True, timeout=60,
-                          env=env, cwd="/tmp")
-
-
-def error_lines(result: subprocess.CompletedProcess) -> list[str]:
-    """What the node said, without pybullet's import banner."""
-    text = result.stderr + result.stdout
-    return [line for line in text.splitlines() if line.strip() and not line.startswith("pybullet build time")]
-
-
-@pytest.mark.parametrize("command,expected", [
-    *[((node, "--ros-args", "-p", "line_sped_fpm:=130"), "unknown parameter line_sped_fpm") for node in NODES],
-    (("grader", "--ros-args", "-p", "lanes:=["),
-     "bad --ros-args: Couldn't parse parameter override rule: '-p lanes:=['"),
-    (("segmenter", "--ros-args", "-p", "lanes"), "bad --ros-args: Couldn't parse parameter override rule: '-p lanes'"),
-    (("line_sim", "--ros-args", "-p", "k_values:=[]"), "parameter k_values: needs a value like [0.0, 100.0]"),
-    (("reject_gate", "--ros-args", "-p", "gate_distance_m:=[]"), "parameter gate_distance_m: needs a value like [0.6]"),
-    (("line_sim", "--ros-args", "-p", "k_values:=[.nan]"), "k_values must be a non-empty list of finite values"),
-    (("reject_gate", "--ros-args", "-p", "line_speed_fpm:=0.5"), "out of range"),
-])
-def test_bad_parameters_give_one_line_and_exit_2(ros_domain, command, expected):
-    result = run(ros_domain, *command)
-    lines = error_lines(result)
-    assert result.returncode == 2, lines
-    assert len(lines) == 1 and expected in lines[0], lines
-    if "unknown" in expected:
-        assert "knows: " in lines[0] and ("lanes," in lines[0] or "output," in lines[0])
-
-
-@pytest.mark.parametrize("node", NODES)
-def test_stray_arguments_print_usage_and_exit_2(ros_domain, node):
-    result = run(ros_domain, node, "--lanes", "3")
-    assert result.returncode == 2
-    lines = error_lines(result)
-    assert lines[0] == f"{node}: unexpected argument --lanes 3" and lines[1].startswith(f"usage: {node} "), lines
-    assert "Traceback" not in result.stderr
-
-
-@pytest.mark.parametrize("node,parameter", [("segmenter", "lanes"), ("reject_gate", "gate_distance_m"),
-                                            ("recorder", "output")])
-def test_help_lists_the_parameters(ros_domain, node, parameter):
-    result = run(ros_domain, node, "--help")
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.startswith(f"usage: {node} ") and parameter in result.stdout
 
 
 def test_declared_parameters_are_read_only():
@@ -175,12 +127,16 @@ def test_the_range_still_holds_for_whole_numbers_and_other_types_are_still_refus
     assert declare(make_node(speed=2.5), "speed", 100.0, "speed", 1.0, 400.0) == 2.5
 
 
-def test_a_node_started_with_a_whole_number_speed_runs_and_one_out_of_range_exits_with_one_line(ros_domain):
+def test_a_node_started_with_a_whole_number_speed_runs(ros_domain):
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
     command = [entry_point("reject_gate"), "--ros-args", "-p", "line_speed_fpm:=130"]
-    with pytest.raises(subprocess.TimeoutExpired):
+    with pytest.raises(subprocess.TimeoutExpired):  # still running: not refused
         subprocess.run(command, capture_output=True, timeout=4, env=env)
-    result = subprocess.run([*command[:-1], "line_speed_fpm:=1000"], capture_output=True, text=True, timeout=30,
-                            env=env)
-    assert result.returncode == 2 and "out of range" in result.stderr
-    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_nan_or_infinite_decimal_is_refused_even_without_a_range(make_node):
+    with pytest.raises(ValueError, match=r"parameter gaps: must be a finite number, got \[0.6, nan\]"):
+        declare(make_node(gaps=[0.6, math.nan]), "gaps", [0.6], "gaps")
+    with pytest.raises(ValueError, match="parameter period: must be a finite number, got inf"):
+        declare(make_node(period=math.inf), "period", 1.0, "period")
+    assert declare(make_node(gaps=[0.5, 0.7]), "gaps", [0.6], "gaps") == [0.5, 0.7]

@@ -10,6 +10,8 @@ traceback, and shuts the node down cleanly on Ctrl-C / SIGTERM (summary line, ex
 
 from __future__ import annotations
 
+import array
+import math
 import re
 import signal
 import sys
@@ -56,10 +58,15 @@ def _whole_number_override(node, name: str, default):
 
 
 def _typed(name: str, default, value):
-    """An override rclpy could not type (``-p name:=[]``) comes back as None: refuse it with the expected form."""
+    """An override rclpy could not type (``-p name:=[]``) comes back as None: refuse it with the expected form.
+    A NaN or infinite decimal is refused too: rclpy's range check lets it through a parameter without a range."""
     if value is None and default is not None:
         example = list(default) if isinstance(default, (list, tuple)) else default
         raise ValueError(f"parameter {name}: needs a value like {example!r}, got an empty or untyped one")
+    numbers = list(value) if isinstance(value, (list, tuple, array.array)) else [value]
+    if not all(math.isfinite(v) for v in numbers if isinstance(v, float)):
+        shown = numbers if isinstance(value, (list, tuple, array.array)) else value
+        raise ValueError(f"parameter {name}: must be a finite number, got {shown!r}")
     return value
 
 

@@ -1,0 +1,182 @@
+"""Bad parameters as a user types them, through every node's entry point and `woody run`.
+
+A refusal is one line, ``<program>: ...``, exit code 2, no traceback, and nothing claimed: the
+command runs in an empty folder that stays empty (the recorder is pointed at a bag in it, `woody
+run` at an output folder in it). Unknown names are refused with the names the node knows (the list
+its ``--help`` prints); stray arguments print the usage; a NaN, an empty list or a value outside the
+range is refused with the same range in every node that takes the parameter; every parameter is
+read-only, so setting one on a running node (what ``ros2 param set`` does) is refused with the reason.
+
+The refusals run as one batch per table, four processes at a time (each takes 1-2 s alone).
+More `woody run` refusals (``--k 0 nan``, ``--speed-fpm 0.5``, the line options) are in
+tests/woody_tools/test_woody_run.py.
+"""
+
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+
+import pytest
+
+from bad_input.conftest import assert_one_clear_line, run_entries
+from woody_tools.processes import entry_point, lease_domain
+
+pytestmark = pytest.mark.ros
+"""Starts node entry points and `woody run` as processes."""
+
+NODES = ("line_sim", "segmenter", "grader", "reject_gate", "recorder")
+BAG = "refused.mcap"
+"""Where the recorder is told to record in every refused command: it must not be created."""
+UNCLOSED = "Couldn't parse parameter override rule: '-p lanes:=['"
+
+
+def ros_args(node: str, *overrides: str) -> tuple[str, ...]:
+    bag = ("-p", f"output:={BAG}") if node == "recorder" else ()
+    return (node, "--ros-args", *bag, *(word for override in overrides for word in ("-p", override)))
+
+
+NODE_REFUSALS = {  # command: what its one line says
+    **{ros_args(node, "line_sped_fpm:=130"): "invalid parameter: unknown parameter line_sped_fpm; " for node in NODES},
+    **{ros_args(node, "lanes:=["): f"bad --ros-args: {UNCLOSED}" for node in NODES},
+    **{ros_args(node, "lanes"): "bad --ros-args: Couldn't parse parameter override rule: '-p lanes'" for node in NODES},
+    ros_args("line_sim", "k_values:=[]"): "parameter k_values: needs a value like [0.0, 100.0], got an empty",
+    ros_args("reject_gate", "gate_distance_m:=[]"): "parameter gate_distance_m: needs a value like [0.6], got an",
+    ros_args("grader", "line_threshold:=[]"): "parameter line_threshold: needs a value like [",
+    ros_args("line_sim", "k_values:=[0.0, .nan]"): "parameter k_values: must be a finite number, got [0.0, nan]",
+    ros_args("reject_gate", "gate_distance_m:=[.nan]"): "parameter gate_distance_m: must be a finite number",
+    ros_args("grader", "line_threshold:=[.inf, 0.0, 0.0]"): "parameter line_threshold: must be a finite number",
+    ros_args("line_sim", "line_speed_fpm:=.nan"): "Parameter line_speed_fpm out of range Min: 1.0, Max: 400.0",
+    ros_args("line_sim", "line_speed_fpm:=0.5"): "Parameter line_speed_fpm out of range Min: 1.0, Max: 400.0",
+    ros_args("reject_gate", "line_speed_fpm:=0.5"): "Parameter line_speed_fpm out of range Min: 1.0, Max: 400.0",
+    ros_args("reject_gate", "line_speed_fpm:=1000"): "Parameter line_speed_fpm out of range Min: 1.0, Max: 400.0",
+    **{ros_args(node, "lanes:=7"): "Parameter lanes out of range. Min: 1, Max: 6"
+       for node in ("line_sim", "segmenter", "grader", "reject_gate")},
+    ros_args("segmenter", "lanes:=2.5"): "Trying to set parameter 'lanes' to '2.5' of type 'DOUBLE', expecting",
+    ros_args("line_sim", "k_values:=[-5.0]"): "k_values must be a non-empty list of finite values >= 0, got [-5.0]",
+    ros_args("recorder", "compression:=bogus"): "unknown compression 'bogus' (zstd, lz4 or none)",
+    ros_args("recorder", "queue_depth:=0"): "queue_depth, max_buffer_mb and chunk_size must be >= 1",
+    ("line_sim", "--ros-args", "--params-file", "missing.yaml"):
+        "bad --ros-args: Couldn't parse params file: '--params-file missing.yaml'",
+}
+RUN_REFUSALS = {  # `woody run` options that become node parameters: refused before any node starts
+    ("--lanes", "7"): "--lanes must be 1..6, got 7",
+    ("--lanes", "0"): "--lanes must be 1..6, got 0",
+    ("--speed-fpm", "400.5"): "--speed-fpm must be in [1, 400], got 400.5",
+    ("--speed-fpm", "nan"): "--speed-fpm must be in [1, 400], got nan",
+    ("--k", "-1"): "--k values must be finite and >= 0, got -1",
+    ("--k", "0", "inf"): "--k values must be finite and >= 0, got 0 inf",
+    ("--fillets", "0"): "--fillets must be >= 1, got 0",
+    ("--side-rate", "-1"): "--side-rate must be in [0, 400] Hz (0: no side camera), got -1",
+}
+
+
+@pytest.fixture(scope="module")
+def domain():
+    with lease_domain({}) as lease:
+        yield lease.domain_id
+
+
+@pytest.fixture(scope="module")
+def refused(domain) -> dict:
+    """Every command of both tables and every node's ``--help`` and stray argument, run once."""
+    commands = [*NODE_REFUSALS, *((node, "--help") for node in NODES), *((node, "--lanes", "3") for node in NODES)]
+    outcomes = run_entries(commands, domain, timeout=60)
+    runs = [("woody", "run", "--fillets", "1", "--out", "run", *options) for options in RUN_REFUSALS]
+    outcomes += run_entries(runs, None, timeout=60)
+    return dict(zip([*commands, *RUN_REFUSALS], outcomes))
+
+
+@pytest.mark.parametrize("command", list(NODE_REFUSALS), ids=" ".join)
+def test_a_bad_parameter_is_one_line_and_exit_2(refused, command):
+    outcome = refused[command]
+    assert_one_clear_line(outcome, command[0], NODE_REFUSALS[command])
+    assert not any(outcome.cwd.iterdir()), list(outcome.cwd.iterdir())  # no bag, no log, nothing claimed
+
+
+@pytest.mark.parametrize("options", list(RUN_REFUSALS), ids=" ".join)
+def test_a_bad_run_option_is_one_line_before_any_node_starts(refused, options):
+    outcome = refused[options]
+    assert_one_clear_line(outcome, "woody run", RUN_REFUSALS[options])
+    assert not any(outcome.cwd.iterdir()), list(outcome.cwd.iterdir())  # no output folder
+
+
+RCLPY_OWN = {"use_sim_time", "start_type_description_service"}
+"""Parameters rclpy declares on every node."""
+
+
+@pytest.mark.parametrize("node", NODES)
+def test_an_unknown_name_is_refused_with_the_names_help_lists(refused, node):
+    line = refused[ros_args(node, "line_sped_fpm:=130")].lines[0]
+    known = set(line.split(f"{node} knows: ")[1].split(", ")) - RCLPY_OWN
+    shown = refused[(node, "--help")]
+    assert shown.code == 0 and shown.stdout.startswith(f"usage: {node} [--ros-args "), shown.lines
+    assert len(known) > 4 and {name for name in known if not re.search(rf"\b{name}\b", shown.stdout)} == set()
+
+
+@pytest.mark.parametrize("node", NODES)
+def test_a_stray_argument_prints_the_usage_and_exit_2(refused, node):
+    outcome = refused[(node, "--lanes", "3")]
+    assert outcome.code == 2 and "Traceback" not in outcome.stderr
+    assert outcome.lines[0] == f"{node}: unexpected argument --lanes 3", outcome.lines
+    assert outcome.lines[1].startswith(f"usage: {node} [--ros-args -p name:=value ... | --params-file FILE]")
+    assert f"`{node} --help` lists its parameters" in outcome.lines[2]
+
+
+RUNTIME_SETS = {"line_sim": ("line_speed_fpm", 130.0), "segmenter": ("lanes", 4), "grader": ("threshold", 9.0),
+                "reject_gate": ("line_speed_fpm", 130.0), "recorder": ("output", "elsewhere.mcap")}
+"""A parameter of each node set at runtime, as `ros2 param set <node> <name> <value>` would."""
+
+
+@pytest.fixture
+def running_nodes(ros_domain, tmp_path):
+    """Every node started from its entry point in tmp_path (line_sim held until a camera subscriber comes)."""
+    import os
+
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain), PYTHONUNBUFFERED="1")
+    extra = {"line_sim": ("-p", "wait_for_subscribers:=1"), "recorder": ("-p", f"output:={BAG}")}
+    procs = {}
+    for node in NODES:
+        log = open(tmp_path / f"{node}.log", "w")
+        procs[node] = subprocess.Popen([entry_point(node), "--ros-args", *extra.get(node, ())], cwd=tmp_path, env=env,
+                                       stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        log.close()
+    yield procs
+    for proc in procs.values():
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_a_parameter_set_on_a_running_node_is_refused_as_read_only(ros_node, running_nodes, tmp_path):
+    """Each node keeps its value and says why; then it stops with its summary and the bag is readable."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    from woody_bag.summary import bag_summary
+
+    executor = SingleThreadedExecutor(context=ros_node.context)
+    executor.add_node(ros_node)
+
+    def answer(future):
+        executor.spin_until_future_complete(future, timeout_sec=30)
+        assert future.done()
+        return future.result()
+
+    try:
+        for node, (name, value) in RUNTIME_SETS.items():
+            client = AsyncParameterClient(ros_node, node)
+            assert client.wait_for_services(timeout_sec=60), f"{node} offers no parameter service"
+            before = answer(client.get_parameters([name])).values
+            result = answer(client.set_parameters([Parameter(name, value=value)])).results[0]
+            assert not result.successful and result.reason == f"Trying to set a read-only parameter: {name}.", node
+            assert answer(client.get_parameters([name])).values == before, node
+    finally:
+        executor.shutdown()
+    for proc in running_nodes.values():
+        proc.send_signal(signal.SIGINT)
+    for node, proc in running_nodes.items():
+        assert proc.wait(60) == 0 and "Traceback" not in (tmp_path / f"{node}.log").read_text(), node
+    assert bag_summary(tmp_path / BAG) is not None and not (tmp_path / "elsewhere.mcap").exists()
