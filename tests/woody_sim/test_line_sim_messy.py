@@ -14,23 +14,29 @@ pytestmark = pytest.mark.ros
 """Starts node entry points as processes."""
 
 MESSY = {"line": "messy", "lane_pitch_m": 0.12, "spawn_spacing_m": 0.2, "speed_change_fpm": 130.0,
-         "speed_change_at_s": 0.2, "duration_s": 0.5, "side_rate_hz": 0.0, "wait_for_subscribers": 0}
+         "speed_change_at_s": 0.2, "duration_s": 0.5, "side_rate_hz": 0.0}
 
 
 def ground_truth(ros_node, ros_domain, log_dir, params: dict, count: int = 6) -> list:
-    """The FilletSpawn messages of one short run, in spawn order."""
+    """The FilletSpawn messages of one short run, in spawn order (the line waits for this node to listen: a run of
+    0.5 s may end before discovery would match it)."""
+    from sensor_msgs.msg import Image
+
+    from woody_common import topics
     from woody_msgs.msg import FilletSpawn
 
     truths: list = []
-    subscription = ros_node.create_subscription(
+    subscriptions = [ros_node.create_subscription(
         FilletSpawn, "/line/ground_truth", truths.append,
-        QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    sim = NodeProcess("line_sim", params, domain_id=ros_domain, log_dir=log_dir)
+        QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)),
+        ros_node.create_subscription(Image, topics.TOP_DEPTH_IMAGE, lambda _: None, 10)]
+    sim = NodeProcess("line_sim", dict(params, wait_for_subscribers=1), domain_id=ros_domain, log_dir=log_dir)
     try:
         assert spin_until(ros_node, lambda: len(truths) >= count, timeout=120.0), sim.log_tail()
     finally:
         assert sim.stop() == 0, sim.log_tail()
-        ros_node.destroy_subscription(subscription)
+        for subscription in subscriptions:
+            ros_node.destroy_subscription(subscription)
     if params.get("speed_change_fpm"):
         assert "belt speed 0.508 -> 0.660 m/s (130 FPM)" in sim.log_tail()
     return sorted(truths, key=lambda t: t.fillet_id)[:count]
@@ -64,7 +70,7 @@ def test_yaw_sd_alone_turns_each_fillet_by_its_own_draw(ros_node, ros_domain, tm
     from woody_sim.line_conditions import LineConditions, place_mesh, placement_for
     from woody_sim.meshes import load_mesh_set
 
-    params = {"yaw_sd_deg": 20.0, "duration_s": 0.2, "side_rate_hz": 0.0, "wait_for_subscribers": 0}
+    params = {"yaw_sd_deg": 20.0, "duration_s": 0.2, "side_rate_hz": 0.0}
     truths = ground_truth(ros_node, ros_domain, tmp_path, params, count=3)
     straight = {m.name: m for m in load_mesh_set("builtin")[0]}
     for truth in truths:

@@ -145,8 +145,7 @@ class LineSim(Node):
         max_lead = declare(self, "max_lead_s", 0.0, "Hold the simulation while the newest /vision/tracks stamp lags "
                            "more than this behind (0 = run free); keeps a slower vision graph from losing frames.",
                            0.0, 10.0)
-        self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
-                                        "subscribers listen to the top depth image.", 0, 100)
+        self._declare_start_gate()
         self.sensor = sensor_preset(declare(self, "sensor", "ideal", "Top RGB-D camera error model: ideal, stereo "
                                             "or structured_light (docs/sensors.md)."))
         self.sensor_rng = np.random.default_rng([seed, SENSOR_STREAM])
@@ -159,6 +158,16 @@ class LineSim(Node):
             damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, segments=segments, workers=workers,
             top_rate=top_rate, side_rate=side_rate, side_idle=side_idle, side_lane=side_lane,
             top_camera=top_camera, max_lead=max_lead)
+
+    def _declare_start_gate(self) -> None:
+        """What the line waits for before its first step: the graph that consumes it."""
+        self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
+                                        "subscribers listen to the top depth image.", 0, 100)
+        self.wait_side_subscribers = declare(self, "wait_for_side_subscribers", 0, "... and this many to the side "
+                                             "camera image (a grader subscribes once its kernels are warm).", 0, 100)
+        self.wait_every_topic = declare(self, "wait_for_every_topic", False, "... and one subscriber to every "
+                                        "topic this node publishes (a recorder of all topics); without it the line "
+                                        "gives late joiners 1 s once the cameras have their subscribers.")
 
     def _declare_conditions(self) -> tuple[str, LineConditions]:
         """The line preset and the placement parameters, whose defaults are the preset's values: ``line``
@@ -214,13 +223,17 @@ class LineSim(Node):
                                change_at=change_at)
 
     def _build_line(self, p: SimpleNamespace) -> None:
-        """The simulated line: geometry, physics world, mesh set, spawn schedule, frame timing, renderer."""
+        """The simulated line: geometry, physics world, renderer, mesh set, spawn schedule."""
         self.speed = fpm_to_mps(p.speed_fpm)
         self.geometry = LineGeometry(lanes=p.lanes, lane_pitch=p.pitch, side_lane=p.side_lane,
                                      **top_camera_preset(p.top_camera))
         config = PhysicsConfig(n_segments=p.segments, damping=p.damping, friction_static=p.mu_static,
                                friction_dynamic=p.mu_dynamic)
         self.world = SplitLineWorld(self.geometry, config, p.workers) if p.workers else LineWorld(self.geometry, config)
+        self.top_period = 1.0 / p.top_rate
+        self.side_period = 1.0 / p.side_rate if p.side_rate > 0 else None
+        # the child processes start (and import) on the other cores while the meshes load here
+        self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
         meshes, errors = load_mesh_set(p.mesh_spec)
         for error in errors:
             self.get_logger().error(error)
@@ -242,10 +255,7 @@ class LineSim(Node):
             self.get_logger().warning(f"in-lane spacing {self._spacing():.3f} m is below the longest placed "
                                       f"fillet ({longest:.3f} m): fillets of a lane may overlap (they do not "
                                       "collide)")
-        self.top_period = 1.0 / p.top_rate
-        self.side_period = 1.0 / p.side_rate if p.side_rate > 0 else None
         self.side_gate = SideFrameGate(idle_period_s=1.0 / p.side_idle)
-        self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None)
 
     def _interval(self) -> float:
         """Seconds between spawns in a lane: the rate's, or the spacing at the current belt speed."""
@@ -273,6 +283,8 @@ class LineSim(Node):
         self.create_service(SpawnFillet, "spawn_fillet", self.on_spawn_request)
         self.pose_pubs = [self.create_publisher(PoseStamped, f"{name}/pose", latched)
                           for name in ("top_camera", "side_camera")]
+        self._line_publishers = [self.clock_pub, self.truth_pub, self.color_pub, self.depth_pub, self.color_info_pub,
+                                 self.depth_info_pub, self.side_pub, self.side_info_pub, *self.pose_pubs]
         for publisher, camera in zip(self.pose_pubs, (self.geometry.top_camera(), self.geometry.side_camera())):
             publisher.publish(_camera_pose(camera))
         self.pacer = LeadLimiter(p.max_lead) if p.max_lead > 0 else None
@@ -460,11 +472,19 @@ class LineSim(Node):
             self.get_logger().warning("/vision/tracks silent: running on without it until it answers")
 
     def _wait_for_subscribers(self, executor) -> None:
-        if not self.wait_subscribers:
+        """Hold until the consumers the start-gate parameters name are there (each costs at most a discovery)."""
+        wanted = [(self.depth_pub, self.wait_subscribers), (self.side_pub, self.wait_side_subscribers)]
+        if self.wait_every_topic:
+            wanted += [(publisher, 1) for publisher in self._line_publishers]
+        wanted = [(publisher, count) for publisher, count in wanted if count]
+        if not wanted:
             return
-        self.get_logger().info(f"waiting for {self.wait_subscribers} subscribers on /top_camera/depth/image_raw")
-        while not self._stop.is_set() and self.depth_pub.get_subscription_count() < self.wait_subscribers:
-            executor.spin_once(timeout_sec=0.05)
+        self.get_logger().info("waiting for subscribers: " + ", ".join(
+            f"{count} on {publisher.topic_name}" for publisher, count in wanted))
+        while not self._stop.is_set() and any(p.get_subscription_count() < n for p, n in wanted):
+            executor.spin_once(timeout_sec=0.02)
+        if self.wait_every_topic:
+            return
         # Give late joiners (a recorder discovering topics) a moment to subscribe to the rest.
         deadline = time.monotonic() + 1.0
         while not self._stop.is_set() and time.monotonic() < deadline:

@@ -55,7 +55,9 @@ import pybullet as p
 
 from woody_common.calibration import Calibration, resolved_calibration
 from woody_common.line import MAX_SPEED_MPS
+from woody_sim import fillet_model, meshes
 from woody_sim.belt_drive import belt_drive
+from woody_sim.disk_cache import cached, digest
 from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
 from woody_sim.hinge_law import chain_mass_matrix, hinge_state, implicit_hinge_torque
 from woody_sim.line_geometry import LineGeometry
@@ -201,6 +203,14 @@ def segment_inertias(model: FilletModel, floor: float) -> np.ndarray:
     return inertia
 
 
+def chain_model(mesh: FilletMesh, n_segments: int) -> FilletModel:
+    """The chain model of ``mesh`` with ``n_segments`` segments (masses for the nominal M), from the disk cache
+    when an earlier run built it (:mod:`woody_sim.disk_cache`)."""
+    key = digest((fillet_model, meshes), mesh.name, n_segments, NOMINAL_MASS, mesh.mesh.vertices.tobytes(),
+                 mesh.mesh.faces.tobytes())
+    return cached("models", key, lambda: build_fillet_model(mesh, n_segments, NOMINAL_MASS), FilletModel)
+
+
 class LineWorld:
     """A headless (p.DIRECT) pybullet conveyor with fillet chains; one instance per physics client."""
 
@@ -273,10 +283,11 @@ class LineWorld:
 
     # ------------------------------------------------------------------ fillets
 
-    def model_for(self, mesh: FilletMesh) -> FilletModel:
-        """The chain geometry for a mesh at this world's N (cached per mesh; masses for the default M)."""
+    def model_for(self, mesh: FilletMesh, built: FilletModel | None = None) -> FilletModel:
+        """The chain geometry for a mesh at this world's N (cached per mesh; masses for the default M); ``built``
+        is that model built elsewhere (another world's, sent to a worker), kept instead of building it again."""
         if mesh not in self._models:
-            self._models[mesh] = build_fillet_model(mesh, self.config.n_segments, NOMINAL_MASS)
+            self._models[mesh] = built or chain_model(mesh, self.config.n_segments)
         return self._models[mesh]
 
     def release(self, mesh: FilletMesh) -> None:

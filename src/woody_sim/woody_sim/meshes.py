@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 import zlib
 from dataclasses import dataclass
 from functools import cached_property
@@ -31,6 +32,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 from scipy import interpolate, ndimage, spatial
+
+from woody_sim.disk_cache import cached, digest
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl")
 BUILTIN_DIR = Path(__file__).resolve().parent / "meshes"
@@ -420,8 +423,18 @@ def _read(path: Path, label: str) -> trimesh.Trimesh:
 
 
 def load_mesh(path: str | Path) -> FilletMesh:
-    """Load an OBJ/PLY/STL fillet (m, cm or mm), repair small defects and move it to the canonical frame."""
+    """Load an OBJ/PLY/STL fillet (m, cm or mm), repair small defects and move it to the canonical frame; a file
+    loaded before (same path, size and modification time) comes from the disk cache (:mod:`woody_sim.disk_cache`)."""
     path = Path(path)
+    try:
+        stat = path.stat()
+    except OSError:
+        return _load_mesh(path)  # says why, in its words
+    key = digest((sys.modules[__name__],), str(path), str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    return cached("meshes", key, lambda: _load_mesh(path), FilletMesh)
+
+
+def _load_mesh(path: Path) -> FilletMesh:
     label = str(path)
     if not path.is_file():
         raise MeshError(f"{label}: file not found")

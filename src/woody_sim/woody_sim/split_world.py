@@ -111,17 +111,17 @@ class SplitLineWorld:
         return self._local.blown_up + self._blown
 
     def model_for(self, mesh: FilletMesh) -> FilletModel:
-        """The chain geometry for a mesh; the workers build their own copies meanwhile."""
+        """The chain geometry for a mesh, built here once and sent to the workers with the mesh."""
         self._mesh_key(mesh)
         return self._local.model_for(mesh)
 
     def _mesh_key(self, mesh: FilletMesh) -> int:
-        """A mesh is sent to the workers once and named by its key afterwards."""
+        """A mesh is sent to the workers once, with its chain model, and named by its key afterwards."""
         key = self._mesh_keys.get(mesh)
         if key is None:
             key = self._mesh_keys[mesh] = self._next_key  # never a released mesh's key: the workers forgot it
             self._next_key += 1
-            self._broadcast(("mesh", key, mesh))
+            self._broadcast(("mesh", key, mesh, self._local.model_for(mesh)))
         return key
 
     def _broadcast(self, msg: tuple) -> None:
@@ -242,9 +242,9 @@ def _serve(conn: mpc.Connection, geometry: LineGeometry, config: PhysicsConfig) 
 def _obey(world: LineWorld, meshes: dict[int, FilletMesh], msg: tuple) -> tuple[Any, ...] | None:
     op = msg[0]
     if op == "mesh":
-        _, key, mesh = msg
+        _, key, mesh, model = msg
         meshes[key] = mesh
-        world.model_for(mesh)
+        world.model_for(mesh, model)
     elif op == "spawn":
         _, step, key, k, lane, mass, speed, fillet_id, offset = msg
         world.spawn(meshes[key], k, lane, mass, speed, fillet_id, spawn_time=step * world.config.dt,
