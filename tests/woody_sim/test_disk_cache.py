@@ -36,6 +36,14 @@ def test_a_chain_model_built_once_is_read_back_bit_for_bit(cache, mesh, monkeypa
     assert _same_model(again, built) and _same_model(again, build_fillet_model(mesh, 40, NOMINAL_MASS))
 
 
+def test_a_turned_copy_is_built_not_cached(cache, mesh):
+    from woody_sim.meshes import yawed
+
+    turned = yawed(mesh, 12.0)
+    assert _same_model(line_world.chain_model(turned, 40), build_fillet_model(turned, 40, NOMINAL_MASS))
+    assert not (cache / "models").exists()
+
+
 def test_a_mesh_file_is_read_once_until_it_changes(cache, tmp_path):
     source = tmp_path / "fillet.obj"
     source.write_bytes((BUILTIN_DIR / "seed0001.obj").read_bytes())

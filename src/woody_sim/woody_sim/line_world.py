@@ -61,7 +61,7 @@ from woody_sim.disk_cache import cached, digest
 from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
 from woody_sim.hinge_law import chain_mass_matrix, hinge_state, implicit_hinge_torque
 from woody_sim.line_geometry import LineGeometry
-from woody_sim.meshes import FilletMesh
+from woody_sim.meshes import DERIVED_MARK, FilletMesh
 
 MAX_MASS = 1000.0
 DEFAULT_DAMPING = 0.05
@@ -205,7 +205,10 @@ def segment_inertias(model: FilletModel, floor: float) -> np.ndarray:
 
 def chain_model(mesh: FilletMesh, n_segments: int) -> FilletModel:
     """The chain model of ``mesh`` with ``n_segments`` segments (masses for the nominal M), from the disk cache
-    when an earlier run built it (:mod:`woody_sim.disk_cache`)."""
+    when an earlier run built it (:mod:`woody_sim.disk_cache`). A turned or scaled copy (a messy line's fillet)
+    is used once and is built, not cached."""
+    if DERIVED_MARK in mesh.source:
+        return build_fillet_model(mesh, n_segments, NOMINAL_MASS)
     key = digest((fillet_model, meshes), mesh.name, n_segments, NOMINAL_MASS, mesh.mesh.vertices.tobytes(),
                  mesh.mesh.faces.tobytes())
     return cached("models", key, lambda: build_fillet_model(mesh, n_segments, NOMINAL_MASS), FilletModel)

@@ -36,6 +36,8 @@ from scipy import interpolate, ndimage, spatial
 from woody_sim.disk_cache import cached, digest
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl")
+DERIVED_MARK = "@"
+"""Joins a turned or scaled copy's source to its original's (``seed0000.obj@yaw+12.0``)."""
 BUILTIN_DIR = Path(__file__).resolve().parent / "meshes"
 BUILTIN_REFERENCE_NAMES = ("seed0000", "seed0001", "seed0002")
 BUILTIN_GENERATED_SEEDS = (0, 1, 2)
@@ -267,7 +269,8 @@ def yawed(fillet: FilletMesh, degrees: float) -> FilletMesh:
     c, s = math.cos(angle), math.sin(angle)
     mesh = fillet.mesh.copy()
     mesh.apply_transform(_homogeneous(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])))
-    return FilletMesh(name=fillet.name, mesh=_centre(mesh), source=f"{fillet.source}@yaw{float(degrees):+.1f}")
+    return FilletMesh(name=fillet.name, mesh=_centre(mesh),
+                      source=f"{fillet.source}{DERIVED_MARK}yaw{float(degrees):+.1f}")
 
 
 def scaled(fillet: FilletMesh, factor: float) -> FilletMesh:
@@ -278,7 +281,7 @@ def scaled(fillet: FilletMesh, factor: float) -> FilletMesh:
         raise ValueError(f"scale must be a positive finite number, got {factor!r}")
     mesh = fillet.mesh.copy()
     mesh.apply_scale(factor)
-    return FilletMesh(name=fillet.name, mesh=_centre(mesh), source=f"{fillet.source}@x{factor:.3f}")
+    return FilletMesh(name=fillet.name, mesh=_centre(mesh), source=f"{fillet.source}{DERIVED_MARK}x{factor:.3f}")
 
 
 MAX_YAW_SD_DEG = 45.0
