@@ -76,6 +76,10 @@ LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOO
           "unscored": FilletVerdict.CLASS_UNSCORED}
 
 
+SIDE_QUEUE_FRAMES = 60
+"""Side frames queued for the grader (1 s of a 60 Hz camera, ~120 MB at most): a line running faster than real
+time sends a passage's frames in a burst, and a frame pushed out of a short queue is a passage measured without
+its NMDM."""
 EARLY_TRACKS = 900
 """Track messages kept while camera_info has not arrived yet (30 s of a 30 Hz camera)."""
 
@@ -138,7 +142,8 @@ class Grader(Node):
         self.create_subscription(FilletTrackArray, topics.TRACKS, self.on_tracks,
                                  QoSProfile(depth=topics.TRACKS_QUEUE_DEPTH))
         if self.side is not None:
-            self.create_subscription(Image, topics.SIDE_IMAGE, self.on_side_image, sensor)
+            side_queue = QoSProfile(history=sensor.history, depth=SIDE_QUEUE_FRAMES, reliability=sensor.reliability)
+            self.create_subscription(Image, topics.SIDE_IMAGE, self.on_side_image, side_queue)
         self.create_timer(0.1, self.on_timer)
         self.frame_id = ""
 
