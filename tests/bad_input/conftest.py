@@ -4,7 +4,7 @@ API (import with ``from bad_input.conftest import ...``; the ``entry`` fixture b
 
 - ``run_entry(*command, domain, timeout=60, cwd=None, env=None) -> Outcome``: run ``command[0]`` from
   ``.venv/bin`` with the rest as arguments on ROS domain ``domain`` (None: ``ROS_DOMAIN_ID`` unset, as
-  for `woody run`, which leases a domain of its own), in a session of its own; ``cwd``
+  for `woody run`, which leases a domain of its own), leading its own process group; ``cwd``
   defaults to a fresh temporary folder, so nothing a refusal leaves behind goes unnoticed (see
   ``Outcome.cwd``). A command still running after ``timeout`` s is killed with its children and has
   ``code`` None (it was not refused).

@@ -1,4 +1,5 @@
-"""`woody meshes stats`: the table, the JSON file and bad specs."""
+"""`woody meshes stats`: the table, the JSON file, the segmenter's footprint (bad meshes and specs:
+tests/bad_input/test_meshes.py)."""
 
 from __future__ import annotations
 
@@ -20,12 +21,6 @@ def test_stats_prints_each_set_and_writes_json(tmp_path, capsys) -> None:
     assert set(first["summary"]) == set(DESCRIPTOR_NAMES)
     widths = [first["meshes"][0][f"width_{p}"] for p in (10, 25, 50, 75, 90)]
     assert all(0.0 < w <= 1.0 for w in widths)
-
-
-def test_bad_spec_is_one_line_and_exit_2(capsys) -> None:
-    assert main(["meshes", "stats", "generated:0"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.startswith("woody meshes stats: mesh spec 'generated:0'") and "\n" not in err
 
 
 def test_height_threshold_gives_the_segmenters_smaller_footprint(tmp_path, capsys) -> None:
