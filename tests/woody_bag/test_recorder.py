@@ -244,3 +244,32 @@ def test_a_damaged_chunk_stops_reading_with_one_line(tmp_path):
     with pytest.raises(BagError, match=r"full\.mcap: corrupt after \d+ messages at t=[\d.]+s \("):
         for _topic, type_name, raw, _ in read_bag(full):
             decode(type_name, raw)
+
+
+def test_a_recorder_at_its_file_size_limit_stops_with_one_line_and_a_readable_bag(ros_domain, spawn_helper, tmp_path):
+    """RLIMIT_FSIZE on the running recorder stands in for a full disk (EFBIG and ENOSPC are handled alike)."""
+    import resource
+
+    limit = 60_000
+    recorder = start_recorder(ros_domain, tmp_path, flush_period=0.25)
+    resource.prlimit(recorder.process.pid, resource.RLIMIT_FSIZE, (limit, limit))
+    try:
+        spawn_helper("publish_known", "--count", "400", "--rate", "40", "--small-images")
+        assert recorder.process.wait(60) == 1, recorder.log_tail()
+    finally:
+        recorder.stop()
+    log = recorder.log_path.read_text()
+    errors = [line for line in log.splitlines() if "[ERROR]" in line]
+    bag = tmp_path / "run.mcap"
+    assert "Traceback" not in log and len(errors) == 1, log
+    assert f"stopped recording: {bag}: File too large (EFBIG)" in errors[0], errors[0]
+    assert f"`woody bag recover {bag} OUT.mcap`" in errors[0], errors[0]
+    assert bag.stat().st_size < limit  # cut back to its last whole record
+    clock = []
+    with pytest.raises(BagError, match=r"truncated after \d+ messages"):
+        for topic, type_name, data, _ in read_bag(bag):
+            msg = decode(type_name, data)
+            assert msg == known(topic, index_of(topic, msg), small_images=True)
+            clock += [index_of(topic, msg)] if topic == "/clock" else []
+    assert clock == list(range(len(clock))) and len(clock) >= 5, clock
+    _check_recovered(bag, tmp_path / "fixed.mcap", len(clock), len(clock))

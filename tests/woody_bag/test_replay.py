@@ -146,6 +146,38 @@ def test_topics_live_nodes_publish_are_not_replayed_unless_asked(ros_node, ros_d
     assert len(listener.got[VERDICTS]) == len(VERDICT_TIMES) and len(listener.got[TRACKS]) == len(TRACK_TIMES)
 
 
+def test_a_live_publisher_that_appears_during_playback_stops_that_topic(ros_node, ros_domain, tmp_path):
+    """A grader started after the replay: from the moment it is seen, the bag's verdicts and clock stop (one line
+    each time), the other topics play on."""
+    from rosgraph_msgs.msg import Clock
+
+    bag = tmp_path / "long.mcap"
+    with BagWriter(bag) as writer:
+        for topic, type_name in ((TRACKS, "woody_msgs/msg/FilletTrackArray"),
+                                 (VERDICTS, "woody_msgs/msg/FilletVerdict"), ("/clock", "rosgraph_msgs/msg/Clock")):
+            writer.add_topic(topic, type_name)
+        for i in range(40):  # 6 s: a message of each topic every 0.15 s
+            for topic, msg in ((TRACKS, known(TRACKS, i)), (VERDICTS, known(VERDICTS, i)), ("/clock", sim_clock(i))):
+                writer.write(topic, serialize_message(msg), T0 + i * 150_000_000)
+    listener = Listener(ros_node)
+    proc = start_replay(ros_domain, tmp_path, str(bag), "--discovery", "0")
+    assert spin_until(ros_node, lambda: len(listener.got[VERDICTS]) >= 5, timeout=30), proc.communicate()
+    ros_node.create_publisher(TOPICS[VERDICTS][0], VERDICTS, 10)  # the live grader comes up
+    ros_node.create_publisher(Clock, "/clock", 10)  # and a live simulator
+    appeared = time.monotonic()
+    listener.spin_while(proc, timeout=40.0)
+    _, err = proc.communicate()
+    assert proc.returncode == 0, err
+    grace = 1.0  # discovery of the new publishers by the player, and its check period
+    assert [t for t, _ in listener.got[VERDICTS] if t > appeared + grace] == [], err
+    assert [t for t, _ in listener.got["/clock"] if t > appeared + grace] == [], err
+    assert 5 <= len(listener.got[VERDICTS]) < 40 and len(listener.got[TRACKS]) == 40, err
+    lines = err.splitlines()
+    assert lines and all(line.startswith("replay: live nodes publish ") for line in lines), err
+    assert "/grading/verdicts (by pytest_probe)" in err and "/clock (by pytest_probe)" in err, err
+    assert "not replayed from t=" in lines[0], err
+
+
 def test_a_namespace_moves_every_recorded_topic_and_the_clock():
     assert player.moved("/grading/verdicts", "") == "/grading/verdicts"
     assert player.moved("/grading/verdicts", "/line2/") == "/line2/grading/verdicts"

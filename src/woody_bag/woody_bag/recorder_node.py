@@ -396,6 +396,17 @@ class Recorder(Node):
                 f"`woody bag recover {self.output} OUT.mcap` writes it complete (OUT on a disk with space)")
 
 
+def recorder_failure(log_path) -> str | None:
+    """The recorder's one failure line (`FAILURE_PREFIX` ..., e.g. a full disk) in its log, prefixed ``recorder:``
+    and without the logger's fields; None when the log holds none."""
+    try:
+        text = open(log_path, errors="replace").read()
+    except OSError:
+        return None
+    found = [line[line.index(FAILURE_PREFIX):] for line in text.splitlines() if FAILURE_PREFIX in line]
+    return f"recorder: {found[-1]}" if found else None
+
+
 def _drop_text(written: int, published: int | None) -> str:
     if published is None:
         return f"{written}/?"

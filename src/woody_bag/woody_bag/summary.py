@@ -124,11 +124,12 @@ def recorded_losses(metadata: dict[str, dict[str, str]]) -> dict[str, int] | Non
 
 
 def losses_text(losses: dict[str, int] | None) -> str:
-    """``"none lost in transport"``, ``"19 lost in transport (/clock 13, ...)"`` or, for a bag without
-    `LOSSES_RECORD` (its recorder did not finish it, or another recorder wrote it), that they are not recorded."""
+    """``"no message lost in transport"``, ``"19 messages lost in transport (/clock 13, ...)"`` or, for a bag
+    without `LOSSES_RECORD` (its recorder did not finish it, or another recorder wrote it), that they are not
+    recorded."""
     if losses is None:
         return "losses in transport not recorded"
     if not losses:
-        return "none lost in transport"
-    return (f"{sum(losses.values())} lost in transport ("
+        return "no message lost in transport"
+    return (f"{sum(losses.values())} messages lost in transport ("
             + ", ".join(f"{t} {n}" for t, n in sorted(losses.items(), key=lambda item: -item[1])) + ")")
