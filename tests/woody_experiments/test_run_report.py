@@ -6,16 +6,22 @@ from __future__ import annotations
 import math
 
 from woody_experiments.run_report import (
+    CALIBRATED_SPEEDS,
+    GATE_MISSED_REASON,
     UNSCORED_DIVERTED,
     Spawn,
     Verdict,
     accuracy,
     accuracy_title,
     build_report,
+    calibrated_speeds,
+    diversion_summary,
+    gate_missed,
     grade_confusion,
     join,
     read_csv,
     report_threshold,
+    uncalibrated_speed_note,
     verdict_table,
     write_csv,
 )
@@ -115,3 +121,38 @@ def test_a_crowded_lane_matches_each_verdict_to_its_own_fillet():
     assert [(r["sim_id"], r["fillet_id"], r["verdict"]) for r in rows][:3] == [
         (0, "", "missing"), (1, 8, "woody"), (2, 9, "normal")]
     assert rows[3]["fillet_id"] == 10 and rows[3]["reason"] == "no spawned fillet matches"
+
+
+def test_a_fillet_to_divert_without_a_gate_command_counts_as_not_diverted(tmp_path):
+    """reject_gate sends no command for a verdict that came too late: the fillet passed, whatever its verdict."""
+    spawns = [Spawn(sim_id=i, lane=i, mesh="m", k=100.0, mass=20.0, line_speed=2.032, stamp=0.0, spawn_x=-1.016)
+              for i in range(3)]
+    verdicts = [Verdict(fillet_id=10 + i, lane=i, stamp=0.5, classification="woody", grade="severe", phi=3.0,
+                        hu_term=0.1, solidity_term=0.01, nmdm=math.nan, mdm=math.nan, be=math.nan, threshold=8.0,
+                        score=3.0) for i in range(3)]
+    rows = join(spawns, verdicts, gate_commands={(0, 10), (2, 12)})
+    assert [r["gate_command"] for r in rows] == ["sent", "none", "sent"]
+    assert [gate_missed(r, True) for r in rows] == [False, True, False]
+    acc = accuracy(rows, divert_unscored=True)
+    assert (acc.woody_diverted, acc.correct) == (2, 3) and math.isclose(acc.line_accuracy, 2 / 3)
+    assert diversion_summary(rows, True) == ("line accuracy 66.7%, scored 100.0%; diverted 2 of 3 woody fillets; "
+                                             f"1 not diverted ({GATE_MISSED_REASON}): fillets 11")
+    assert GATE_MISSED_REASON in verdict_table(rows).splitlines()[2]
+    text = build_report(read_csv(write_csv(rows, tmp_path / "verdicts.csv")), tmp_path).read_text()
+    assert "line accuracy (every fillet; one without a verdict is not diverted): **66.7%**" in text
+    assert f"- not diverted, {GATE_MISSED_REASON}: fillets 11" in text and "11 (woody, 3, late at the gate)" in text
+    unknown = join(spawns, verdicts)  # no gate data (a verdict table alone): the verdict decides
+    assert {r["gate_command"] for r in unknown} == {""} and accuracy(unknown).woody_diverted == 3
+
+
+def test_a_line_speed_outside_the_calibrated_ones_is_noted_in_the_report(tmp_path):
+    assert uncalibrated_speed_note(120.0, (90.0, 140.0)) is None and uncalibrated_speed_note(200.0, None) is None
+    note = uncalibrated_speed_note(200.0, (90.0, 140.0))
+    assert note.startswith("line speed 200 FPM is outside the 90..140 FPM the calibration's cuts were fitted on")
+    assert calibrated_speeds({CALIBRATED_SPEEDS: "90..140"}) == (90.0, 140.0)
+    assert calibrated_speeds({CALIBRATED_SPEEDS: "not recorded in the calibration"}) is None
+    spawns = [Spawn(sim_id=i, lane=0, mesh="m", k=0.0, mass=20.0, line_speed=speed, stamp=2.0 * i, spawn_x=-1.0)
+              for i, speed in enumerate((0.508, 1.016))]  # 100 and 200 FPM (a speed change)
+    text = build_report(join(spawns, []), tmp_path, run_info={CALIBRATED_SPEEDS: "90..140"}).read_text()
+    assert f"- {note}" in text and "100 FPM is outside" not in text
+    assert "outside" not in build_report(join(spawns, []), tmp_path).read_text()  # the range is not known

@@ -87,6 +87,16 @@ class Calibration:
         if self.total_mass_kg <= 0.0:
             raise ValueError(f"calibration: total_mass_kg must be > 0, got {self.total_mass_kg}")
 
+    @property
+    def speed_range_fpm(self) -> tuple[float, float] | None:
+        """(lowest, highest) line speed in FPM the grading cuts were fitted on (provenance ``line_speeds_fpm``,
+        written by `woody calibrate`); None when the file does not record them."""
+        try:
+            speeds = [float(v) for v in str(self.provenance.get("line_speeds_fpm", "")).split(",") if v.strip()]
+        except ValueError:
+            return None
+        return (min(speeds), max(speeds)) if speeds else None
+
 
 def _node_key(node: str) -> str:
     return f"/**/{node}"

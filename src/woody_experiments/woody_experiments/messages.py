@@ -37,24 +37,31 @@ def verdict_from_msg(msg) -> Verdict:
 
 
 def rows_from_bag(path: Path, woody_k: float = 50.0) -> tuple[list[dict], str | None]:
-    """Ground truth and verdicts recorded in a bag (of a line in any namespace), joined into verdict-table rows,
-    and where a truncated bag ends (None for a complete one): the readable part of a cut recording still counts."""
-    spawns, verdicts, ended = [], [], None
+    """Ground truth, verdicts and gate commands recorded in a bag (of a line in any namespace), joined into
+    verdict-table rows, and where a truncated bag ends (None for a complete one): the readable part of a cut
+    recording still counts. A bag without the gate's topic leaves the rows' ``gate_command`` unknown."""
+    spawns, verdicts, gated, ended = [], [], set(), None
+    suffixes = {"/" + topics.GROUND_TRUTH: "spawn", "/" + topics.VERDICTS: "verdict",
+                "/" + topics.GATE_COMMANDS: "gate"}
     try:
-        wanted = [t for t in bag_topics(path) if t.endswith(("/" + topics.GROUND_TRUTH, "/" + topics.VERDICTS))]
+        wanted = [t for t in bag_topics(path) if t.endswith(tuple(suffixes))]
         for topic, type_name, data, _log_time in read_bag(path, topics=wanted):
             msg = decode(type_name, data)
-            if topic.endswith("/" + topics.GROUND_TRUTH):
+            kind = next(kind for suffix, kind in suffixes.items() if topic.endswith(suffix))
+            if kind == "spawn":
                 spawns.append(spawn_from_msg(msg))
-            else:
+            elif kind == "verdict":
                 verdicts.append(verdict_from_msg(msg))
+            else:
+                gated.add((msg.lane, msg.fillet_id))
     except BagError as exc:
         if not spawns and not verdicts:
             raise
         ended = str(exc)
     if not spawns and not verdicts:
         raise ValueError(f"{path}: no /line/ground_truth or /grading/verdicts messages in this bag")
-    return join(spawns, verdicts, woody_k), ended
+    has_gate = any(t.endswith("/" + topics.GATE_COMMANDS) for t in wanted)
+    return join(spawns, verdicts, woody_k, gate_commands=gated if has_gate else None), ended
 
 
 def settings_from_bag(path: Path, rows: list[dict]) -> dict | None:

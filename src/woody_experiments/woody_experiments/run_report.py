@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,14 +20,21 @@ VERDICT_COLUMNS = [
     "fillet_id", "lane", "mesh", "k", "speed_fpm", "phi", "hu_term", "solidity_term",
     "nmdm", "mdm", "be", "verdict", "grade", "truth", "sim_id", "mass", "spawn_time", "verdict_time", "reason",
     "threshold", "score", "line_phi", "measured_speed_mps", "leading_end", "rejected_frames", "true_grade",
+    "gate_command",
 ]
 """Columns of verdicts.csv: the paper's twelve first, then what an analyst needs to audit a row: the score the
 verdict used, the line score, the fillet's measured speed and leading end, the window frames rejected as merged
-with a neighbour, and the grade its stiffness should get (woody_experiments.line_grade.true_grade)."""
+with a neighbour, the grade its stiffness should get (woody_experiments.line_grade.true_grade), and whether
+reject_gate sent a command for it (GATE_SENT, GATE_NONE; empty when the gate's commands are not known)."""
+GATE_SENT = "sent"
+GATE_NONE = "none"
 NUMERIC_COLUMNS = {"k", "speed_fpm", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be", "mass", "spawn_time",
                    "verdict_time", "threshold", "score", "line_phi", "measured_speed_mps", "rejected_frames"}
 UNSCORED_DIVERTED = "unscored fillets diverted"
 """Run setting (report.md's table, the bag's ``woody.run`` record): reject_gate's ``divert_unscored``."""
+
+CALIBRATED_SPEEDS = "calibrated line speeds (FPM)"
+"""Run setting: the lowest and highest line speed the calibration's cuts were fitted on, "LOW..HIGH"."""
 
 MATCH_TOLERANCE_S = 0.6
 """A verdict belongs to a spawned fillet when it closes this close to the expected edge crossing."""
@@ -84,12 +91,15 @@ def truth_of(k: float, woody_k: float) -> str:
     return "woody" if k >= woody_k else "normal"
 
 
-def join(spawns: Sequence[Spawn], verdicts: Sequence[Verdict], woody_k: float = 50.0) -> list[dict]:
+def join(spawns: Sequence[Spawn], verdicts: Sequence[Verdict], woody_k: float = 50.0,
+         gate_commands: Collection[tuple[int, int]] | None = None) -> list[dict]:
     """One row per spawned fillet (and per verdict nobody spawned), matched by lane and edge-crossing time.
 
     Per lane, the pairs minimise the total time difference (an assignment, not first come first served): on a
     crowded lane fillets cross the edge less than MATCH_TOLERANCE_S apart, and a fillet without a verdict must
-    not take its neighbour's. Scored verdicts are matched first, the unscored ones to the fillets left."""
+    not take its neighbour's. Scored verdicts are matched first, the unscored ones to the fillets left.
+    ``gate_commands`` holds (lane, fillet id) of every GateCommand the run published: a verdict's row says
+    whether the gate acted on it (reject_gate sends none for a verdict that came too late to divert)."""
     pairs: dict[int, int] = {}
     for lane in sorted({s.lane for s in spawns}):
         for scored in (True, False):  # a scored verdict is stamped at the crossing; an unscored one when it gave up
@@ -100,7 +110,12 @@ def join(spawns: Sequence[Spawn], verdicts: Sequence[Verdict], woody_k: float = 
     used = set(pairs.values())
     order = sorted(range(len(spawns)), key=lambda i: (spawns[i].expected_crossing, spawns[i].lane))
     rows = [_row(spawns[i], verdicts[pairs[i]] if i in pairs else None, woody_k) for i in order]
-    return rows + [_row(None, v, woody_k) for j, v in enumerate(verdicts) if j not in used]
+    rows += [_row(None, v, woody_k) for j, v in enumerate(verdicts) if j not in used]
+    if gate_commands is not None:
+        for row in rows:
+            if row["verdict"] != "missing":
+                row["gate_command"] = GATE_SENT if (row["lane"], row["fillet_id"]) in gate_commands else GATE_NONE
+    return rows
 
 
 def _match(spawns: Sequence[Spawn], spawn_ids: list[int], verdicts: Sequence[Verdict],
@@ -206,9 +221,23 @@ class Accuracy:
         return self.line_correct / self.total if self.total else float("nan")
 
 
-def diverted(row: dict, divert_unscored: bool) -> bool:
-    """Whether reject_gate diverts the row's fillet: graded woody, or unscored when it diverts those."""
+def to_divert(row: dict, divert_unscored: bool) -> bool:
+    """Whether reject_gate is to divert the row's fillet: graded woody, or unscored when it diverts those."""
     return row["verdict"] == "woody" or (divert_unscored and row["verdict"] not in ("normal", "woody", "missing"))
+
+
+def gate_missed(row: dict, divert_unscored: bool) -> bool:
+    """A fillet to divert for which the gate sent no command: its verdict came too late for the diverter."""
+    return to_divert(row, divert_unscored) and row.get("gate_command") == GATE_NONE
+
+
+def diverted(row: dict, divert_unscored: bool) -> bool:
+    """Whether the row's fillet was diverted: to divert, and the gate acted on it (or the gate's commands are not
+    known)."""
+    return to_divert(row, divert_unscored) and not gate_missed(row, divert_unscored)
+
+
+GATE_MISSED_REASON = "no gate command: the verdict came too late to divert it"
 
 
 def accuracy(rows: Sequence[dict], divert_unscored: bool = False) -> Accuracy:
@@ -264,10 +293,23 @@ def diversion_by_condition(rows: Sequence[dict], divert_unscored: bool) -> list[
     out = []
     for key in sorted(groups):
         group = groups[key]
-        missed = [f"{r.get('fillet_id') or r.get('sim_id')} ({r['verdict']}, {_cell(r.get('score'))})"
+        missed = [f"{_fillet_name(r)} ({r['verdict']}, {_cell(r.get('score'))}"
+                  + (", late at the gate)" if gate_missed(r, divert_unscored) else ")")
                   for r in group if not diverted(r, divert_unscored)]
         out.append((key, len(group), len(group) - len(missed), missed))
     return out
+
+
+def diversion_summary(rows: Sequence[dict], divert_unscored: bool) -> str:
+    """One line for the terminal: line accuracy, woody fillets diverted, and the fillets the gate missed."""
+    acc = accuracy(rows, divert_unscored)
+    missed = [_fillet_name(r) for r in rows if gate_missed(r, divert_unscored)]
+    late = (f"; {len(missed)} not diverted ({GATE_MISSED_REASON}): fillets {', '.join(missed)}" if missed else "")
+    return f"{accuracy_title(acc)}; diverted {acc.woody_diverted} of {acc.woody} woody fillets{late}"
+
+
+def _fillet_name(row: dict) -> str:
+    return str(row.get("fillet_id") if row.get("fillet_id") not in ("", None) else row.get("sim_id"))
 
 
 def accuracy_title(acc: Accuracy) -> str:
@@ -293,13 +335,15 @@ TABLE_COLUMNS = [("fillet_id", 9), ("lane", 4), ("mesh", 14), ("k", 5), ("speed_
 TABLE_HEADINGS = {"measured_speed_mps": "v (m/s)", "leading_end": "lead", "speed_fpm": "FPM"}
 
 
-def verdict_table(rows: Sequence[dict], limit: int = 40) -> str:
+def verdict_table(rows: Sequence[dict], limit: int = 40, divert_unscored: bool = False) -> str:
     """A fixed-width table of the main columns for the terminal: the score, line score, measured speed and leading
-    end of each verdict, its grade and, for a fillet without a normal/woody verdict, why."""
+    end of each verdict, its grade and, for a fillet without a normal/woody verdict or one the gate missed, why."""
     lines = ["  ".join(f"{TABLE_HEADINGS.get(c, c):>{w}}" for c, w in TABLE_COLUMNS) + "  reason"]
     for row in rows[:limit]:
         cells = [f"{_cell(row.get(c, ''))[:w]:>{w}}" for c, w in TABLE_COLUMNS]
         reason = row.get("reason", "") if row.get("verdict") not in ("normal", "woody") else ""
+        if gate_missed(row, divert_unscored):
+            reason = "; ".join(filter(None, (reason, GATE_MISSED_REASON)))
         lines.append("  ".join(cells) + (f"  {reason}" if reason else ""))
     if len(rows) > limit:
         lines.append(f"... {len(rows) - limit} more rows")
@@ -312,13 +356,39 @@ def _cell(value: object) -> str:
     return str("" if value is None else value)
 
 
+def uncalibrated_speed_note(fpm: float, calibrated: tuple[float, float] | None) -> str | None:
+    """The warning for a line speed outside the ``calibrated`` (lowest, highest) FPM of the grading cuts; None
+    inside it or when the calibration does not record its speeds."""
+    if calibrated is None or calibrated[0] <= fpm <= calibrated[1]:
+        return None
+    return (f"line speed {fpm:g} FPM is outside the {calibrated[0]:g}..{calibrated[1]:g} FPM the calibration's cuts "
+            "were fitted on: the grade is not validated at this speed")
+
+
+def calibrated_speeds(run_info: dict | None) -> tuple[float, float] | None:
+    """The run's CALIBRATED_SPEEDS setting as (lowest, highest) FPM; None when the run does not record it."""
+    try:
+        low, high = (float(v) for v in str((run_info or {})[CALIBRATED_SPEEDS]).split(".."))
+    except (KeyError, ValueError):
+        return None
+    return low, high
+
+
+def speed_notes_of(rows: Sequence[dict], run_info: dict | None) -> list[str]:
+    """A warning per line speed of the fillets (at their spawn) outside the calibrated speeds."""
+    speeds = sorted({r["speed_fpm"] for r in rows if isinstance(r.get("speed_fpm"), float)
+                     and math.isfinite(r["speed_fpm"])})
+    return [note for note in (uncalibrated_speed_note(fpm, calibrated_speeds(run_info)) for fpm in speeds) if note]
+
+
 def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody line run",
                  run_info: dict | None = None, notes: Sequence[str] = (), extra: Sequence[str] = ()) -> Path:
     """Write report.md and its PNG plots into ``out_dir``; returns the report path.
 
-    ``notes`` (mesh files skipped or converted, where a truncated bag ends) are listed at the
-    top, so nothing left out of the figures goes unsaid; ``extra`` Markdown lines (the fillet
-    pictures of woody_experiments.fillet_pictures) end the report.
+    ``notes`` (mesh files skipped or converted, where a truncated bag ends) and a warning per line
+    speed outside the calibrated ones are listed at the top, so nothing left out of the figures goes
+    unsaid; ``extra`` Markdown lines (the fillet pictures of woody_experiments.fillet_pictures) end the
+    report.
     """
     import matplotlib
 
@@ -335,6 +405,7 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
     lines = [f"# {title}", ""]
     if run_info:
         lines += ["| setting | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in run_info.items()] + [""]
+    notes = list(notes) + speed_notes_of(rows, run_info)
     lines += [f"- {note}" for note in notes] + ([""] if notes else [])
     lines += _markdown_body(rows, scored, side, acc) + list(extra)
     path = out_dir / "report.md"
@@ -353,8 +424,11 @@ def _line_sections(rows: Sequence[dict], acc: Accuracy) -> list[str]:
     """Woody fillets diverted or missed per condition, and the three-class grade's confusion matrix."""
     rule = "graded woody, or unscored" + (" (reject_gate diverts unscored fillets)" if acc.divert_unscored
                                          else "; unscored ones pass (divert_unscored off or not recorded)")
+    late = [_fillet_name(r) for r in rows if gate_missed(r, acc.divert_unscored)]
     lines = ["## Woody fillets diverted", "",
-             f"- diverted {acc.woody_diverted} of {acc.woody} woody fillets (diverted: {rule})",
+             f"- diverted {acc.woody_diverted} of {acc.woody} woody fillets (diverted: {rule}, and the gate sent "
+             "its command in time)",
+             *([f"- not diverted, {GATE_MISSED_REASON}: fillets {', '.join(late)}"] if late else []),
              f"- correct verdicts (normal/woody as the truth): {acc.correct} of {acc.total} fillets", "",
              "| condition | woody fillets | diverted | missed (verdict, score) |", "|---|---|---|---|"]
     lines += [f"| {key} | {n} | {n_out} | {', '.join(missed) or '–'} |"
@@ -483,7 +557,8 @@ def _markdown_body(rows: Sequence[dict], scored: Sequence[dict], side: Sequence[
         group = [r for r in side if float(r["k"]) == k]
         lines.append(f"| {k:g} | {len(group)} | {_mean_sd([r['nmdm'] for r in group], 3)} | "
                      f"{_mean_sd([r['mdm'] for r in group], 1)} | {_mean_sd([r['be'] for r in group], 1)} |")
-    lines += ["", "![nmdm](nmdm_by_k.png)", "", "## Verdicts", "", "```", verdict_table(rows, limit=200), "```", ""]
+    lines += ["", "![nmdm](nmdm_by_k.png)", "", "## Verdicts", "", "```",
+              verdict_table(rows, limit=200, divert_unscored=acc.divert_unscored), "```", ""]
     return lines
 
 

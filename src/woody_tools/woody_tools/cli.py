@@ -39,6 +39,10 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     only = argv[0] if argv and argv[0] in {name for name, _, _ in SUBCOMMANDS} else None
+    if only == "run":  # a run owns processes: a stop signal is kept from the first instant, before slow imports
+        from woody_tools.processes import STOP
+
+        STOP.install()
     args = build_parser(only).parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -13,40 +13,65 @@ import argparse
 import fcntl
 import json
 import os
+import shutil
 import signal
 import sys
 import time
 from datetime import datetime
 from pathlib import Path
 
+from woody_bag.errors import BagError
+from woody_bag.recorder_node import recorder_failure
+from woody_bag.summary import bag_summary, losses_text, recorded_losses
 from woody_common import topics
 from woody_common.line import fpm_to_mps, spacing_at_rate
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.fillet_pictures import write_fillet_pictures
 from woody_experiments.messages import spawn_from_msg, verdict_from_msg
 from woody_experiments.run_report import (
+    CALIBRATED_SPEEDS,
     MATCH_TOLERANCE_S,
     UNSCORED_DIVERTED,
     Spawn,
     Verdict,
     build_report,
+    diversion_summary,
     join,
+    uncalibrated_speed_note,
+    unscored_diverted,
     verdict_table,
     write_csv,
 )
 from woody_sim.line_conditions import LineConditions, longest_placed_length
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_tools.cpu_usage import CpuAccounting
-from woody_tools.processes import DomainInUse, NodeProcess, lease_domain
+from woody_tools.processes import STOP, DomainInUse, NodeProcess, lease_domain
 from woody_vision.grader_core import SCORE_LINE
+from woody_vision.grading import CUT_TERMS
 from woody_vision.segmentation import REAL_CAMERA_FILTERS
 
 MAX_LEAD_S = 0.1
 """line_sim runs at most this far (sim s, 3 top frames) ahead of the segmenter, whose queue holds 5 frames."""
 
 
+FAILED_DIR = "failed"
+"""Where a run that graded nothing leaves its bag and logs, inside --out."""
+HANGUP_LOG = "woody_run.log"
+"""In the run's logs/: what woody run prints once its terminal has closed (SIGHUP)."""
+INTERRUPTED = "interrupted"
+"""Why the watch ended early: a stop signal (STOP)."""
+RECORDING = "recording"
+"""report.md's setting: messages in the bag and those the recorder lost in transport, per topic."""
+OUTPUTS_UNWRITTEN = "cannot write to"
+"""Begins woody run's line when --out takes no more (a full disk); the exit code is then 1."""
+
+
 class RunRefused(Exception):
     """An input `woody run` cannot work with; the message is one line (printed, exit code 2)."""
+
+
+class RunInterrupted(Exception):
+    """A stop signal before the nodes started; the message is one line (printed, exit code 128 + the signal)."""
 
 
 def _claim_out(out: Path, force: bool):
@@ -129,7 +154,8 @@ class LineMonitor:
         reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         self.spawns: list[Spawn] = []
         self.verdicts: list[Verdict] = []
-        self.gate_commands = 0
+        self.gate_commands: set[tuple[int, int]] = set()
+        """(lane, fillet id) of every GateCommand: the fillets the gate acted on in time."""
         self.sim_time = 0.0
         self.first_clock: tuple[float, float] | None = None
         """(wall monotonic, sim s) of the first /clock: when the line itself started, after the nodes' start-up."""
@@ -146,7 +172,7 @@ class LineMonitor:
         self.verdicts.append(verdict_from_msg(msg))
 
     def _on_gate(self, msg) -> None:
-        self.gate_commands += 1
+        self.gate_commands.add((msg.lane, msg.fillet_id))
 
     def _on_clock(self, msg) -> None:
         self.sim_time = stamp_to_seconds(msg.clock)
@@ -197,16 +223,21 @@ def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, obj
             "lane pitch (m)": args.lane_pitch_m, "in-lane spacing (m)": spacing,
             "speed change": (f"to {args.speed_change_fpm:g} FPM at {args.speed_change_at:g} s"
                              if args.speed_change_fpm else "none"),
-            UNSCORED_DIVERTED: True, "namespace": args.namespace or "/"}
+            UNSCORED_DIVERTED: True, "namespace": args.namespace or "/",
+            CALIBRATED_SPEEDS: "..".join(f"{v:g}" for v in args.calibrated_speeds) if args.calibrated_speeds
+            else "not recorded in the calibration"}
 
 
 def run_checked(args: argparse.Namespace) -> int:
     """The line run of checked arguments; meshes, the domain and the output folder are checked before anything is
-    written (`RunRefused`)."""
+    written (`RunRefused`), and a stop signal before the nodes start ends it with nothing written (`RunInterrupted`).
+    """
+    STOP.install()
     fillets = args.fillets if args.fillets is not None or args.duration is not None else 12
     out = Path(args.out) if args.out else Path("bags") / datetime.now().strftime("run-%Y%m%d-%H%M%S")
     meshes, mesh_notes = _check_meshes(args.meshes)
     mesh_notes += _crowding_notes(meshes, args)
+    _check_stop()
     try:
         lease = lease_domain(share=args.share_domain)
     except (DomainInUse, ValueError) as exc:
@@ -216,8 +247,10 @@ def run_checked(args: argparse.Namespace) -> int:
         monitor = LineMonitor(lease.domain_id, args.namespace)
         if lease.exported and not args.share_domain:
             _refuse_foreign_nodes(monitor, lease.domain_id)
+        _check_stop()
         lock = _claim_out(out, args.force)
-        for line in mesh_notes:
+        STOP.hangup_log = out / "logs" / HANGUP_LOG
+        for line in mesh_notes + speed_notes(args):
             print(f"woody run: {line}", file=sys.stderr, flush=True)
         try:
             return _run_line(args, fillets, out, monitor, mesh_notes)
@@ -227,6 +260,19 @@ def run_checked(args: argparse.Namespace) -> int:
         if monitor is not None:
             monitor.close()
         lease.release()
+
+
+def _check_stop() -> None:
+    """`RunInterrupted` when a stop signal came before the nodes started: nothing to stop, nothing written."""
+    if STOP.signum is not None:
+        raise RunInterrupted(f"stopped by {STOP.name} before the line started; nothing written")
+
+
+def speed_notes(args: argparse.Namespace) -> list[str]:
+    """A line per belt speed of the run (its --speed-fpm and --speed-change) outside the speeds the calibration's
+    cuts were fitted on: the grade is not validated there."""
+    speeds = dict.fromkeys((args.speed_fpm, args.speed_change_fpm or args.speed_fpm))
+    return [note for note in (uncalibrated_speed_note(fpm, args.calibrated_speeds) for fpm in speeds) if note]
 
 
 def _refuse_foreign_nodes(monitor: LineMonitor, domain_id: int, seconds: float = 4.0) -> None:
@@ -279,6 +325,7 @@ def _sim_params(args: argparse.Namespace, fillets: int | None) -> dict[str, obje
         "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
         "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
         "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
+        "wait_for_side_subscribers": 2, "wait_for_every_topic": True,
         "max_lead_s": MAX_LEAD_S, "top_camera": args.top_camera, "sensor": args.sensor, "line": args.line,
         "lane_pitch_m": args.lane_pitch_m, **{name: float(value) for name, value in args.placement.items()},
     }
@@ -298,7 +345,7 @@ def _grader_params(args: argparse.Namespace, vision_params: dict[str, object]) -
         params["score"] = args.score
     if args.threshold is not None:
         if (args.score or SCORE_LINE) == SCORE_LINE:
-            params["line_threshold"] = [float(args.threshold), 0.0, 0.0]
+            params["line_threshold"] = [float(args.threshold)] + [0.0] * (len(CUT_TERMS) - 1)  # constant
         else:
             params["threshold"] = float(args.threshold)
     return params
@@ -324,8 +371,9 @@ def _stop_nodes(nodes: list[NodeProcess]) -> None:
 
 
 def _watch(monitor: LineMonitor, nodes: list[NodeProcess], fillets: int | None, args: argparse.Namespace,
-           stopping: dict, cpu: CpuAccounting) -> str | None:
-    """Show progress until the line is done; the reason it stopped early, else None."""
+           cpu: CpuAccounting) -> str | NodeProcess | None:
+    """Show progress until the line is done; why it stopped early (INTERRUPTED, a time-out, a node that died),
+    else None."""
     from tqdm import tqdm
 
     wall_start = time.monotonic()
@@ -345,13 +393,11 @@ def _watch(monitor: LineMonitor, nodes: list[NodeProcess], fillets: int | None, 
                 last_line = time.monotonic()
             bar.update(min(graded, bar.total or graded) - bar.n)
             bar.set_postfix_str(status, refresh=False)
+            if STOP.signum is not None:
+                return INTERRUPTED
             dead = [n for n in nodes if not n.alive()]
             if dead:
-                node = dead[0]
-                return (f"node '{node.name}' exited with code {node.returncode}; last lines of {node.log_path}:\n"
-                        f"{node.log_tail()}")
-            if stopping["signal"] is not None:
-                return "interrupted"
+                return dead[0]
             if elapsed > args.timeout:
                 return f"timed out after {args.timeout:.0f} s of wall time"
             if _finished(monitor, fillets, args):
@@ -364,59 +410,130 @@ def _watch(monitor: LineMonitor, nodes: list[NodeProcess], fillets: int | None, 
 
 def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, monitor: LineMonitor,
               mesh_notes: list[str]) -> int:
+    """Start the nodes, watch the line, stop the nodes however the run ends; write what was graded, or set a run
+    that graded nothing aside; the exit code."""
     print(f"woody run: ROS_DOMAIN_ID={monitor.domain_id}, output {out}/", flush=True)
     nodes: list[NodeProcess] = []
-    cpu = None
-    stopping = {"signal": None}
-
-    def on_signal(signum, _frame):
-        stopping["signal"] = signum
-
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    error = None
+    cpu = reason = None
     try:
         nodes = _start_nodes(args, fillets, out, monitor.domain_id)
         cpu = CpuAccounting({"woody run": os.getpid(), **{n.name: n.process.pid for n in nodes}})
         wall_start = time.monotonic()
-        error = _watch(monitor, nodes, fillets, args, stopping, cpu)
+        reason = _watch(monitor, nodes, fillets, args, cpu)
     finally:
         if cpu is not None:
             cpu.sample()
             wall = time.monotonic() - wall_start
         _stop_nodes(nodes)
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    _write_outputs(args, fillets, out, monitor, mesh_notes)
-    if cpu is not None:
-        print(f"sim {monitor.sim_time:.1f} s in {wall:.1f} s wall: rtf {monitor.sim_time / max(wall, 1e-9):.2f}x")
-        line = monitor.line_rtf(wall_start)
-        if line is not None:
-            print(f"the line itself, after {line[1]:.1f} s of node start-up: rtf {line[0]:.2f}x")
-        print(cpu.summary(wall))
-    if error:
-        print(f"woody run: {error}", file=sys.stderr)
+    failed = reason is not None and not monitor.verdicts
+    bag = (_set_aside(out, nodes) if failed else out) / "line.mcap"
+    recorder = next((n for n in nodes if n.name == "recorder"), None)
+    problems = [_reason_line(reason)] if reason is not None and reason is not recorder else []
+    recorder_failed = recorder is not None and bool(recorder.returncode or reason is recorder)
+    if recorder_failed:
+        problems.append(recorder_failure(recorder.log_path) or recorder_problem(recorder.returncode, bag))
+    if failed:
+        problems.append(f"nothing was graded: the run's bag and logs are in {bag.parent}/, and the same command "
+                        "can run again")
+    else:
+        problems += _write_outputs(args, fillets, out, monitor, mesh_notes)
+    if cpu is not None and not failed:
+        _print_pace(monitor, cpu, wall, wall_start)
+    for problem in problems:
+        print(f"woody run: {problem}", file=sys.stderr, flush=True)
+    if recorder_failed or reason not in (None, INTERRUPTED) or any(p.startswith(OUTPUTS_UNWRITTEN) for p in problems):
         return 1
-    return 0
+    return 128 + STOP.signum if reason == INTERRUPTED else 0
+
+
+def _reason_line(reason: str | NodeProcess) -> str:
+    """What ended the run early, as woody run says it."""
+    if isinstance(reason, NodeProcess):
+        return (f"node '{reason.name}' exited with code {reason.returncode}; last lines of {reason.log_path}:\n"
+                f"{reason.log_tail()}")
+    if reason != INTERRUPTED:
+        return reason
+    terminal = " (the terminal closed)" if STOP.signum == signal.SIGHUP else ""
+    return f"stopped by {STOP.name}{terminal}: the nodes were stopped and what was graded is kept"
+
+
+def recorder_problem(code: int | None, bag: Path) -> str:
+    """The one line for a recorder that ended on its own or failed (``code`` non-zero, negative for a signal): its
+    exit code and the command that rescues the bag."""
+    how = f"code {code}"
+    if code is not None and code < 0 and -code in signal.valid_signals():
+        how += f" ({signal.Signals(-code).name})"
+    rescued = bag.with_name(f"{bag.stem}-recovered{bag.suffix}")
+    return (f"recorder exited with {how}: {bag} may not be finalised; rescue it with "
+            f"`woody bag recover {bag} {rescued}`")
+
+
+def _set_aside(out: Path, nodes: list[NodeProcess]) -> Path:
+    """Move a run's bag and logs into ``out/failed/`` (replacing an earlier one there; the nodes' log paths
+    follow), so a run that graded nothing leaves nothing that blocks the same --out and loses nothing."""
+    failed = out / FAILED_DIR
+    shutil.rmtree(failed, ignore_errors=True)
+    failed.mkdir()
+    for name in ("line.mcap", "logs"):
+        if (out / name).exists():
+            (out / name).rename(failed / name)
+    for node in nodes:
+        node.log_path = failed / "logs" / node.log_path.name
+    return failed
+
+
+def _print_pace(monitor: LineMonitor, cpu: CpuAccounting, wall: float, wall_start: float) -> None:
+    print(f"sim {monitor.sim_time:.1f} s in {wall:.1f} s wall: rtf {monitor.sim_time / max(wall, 1e-9):.2f}x")
+    line = monitor.line_rtf(wall_start)
+    if line is not None:
+        print(f"the line itself, after {line[1]:.1f} s of node start-up: rtf {line[0]:.2f}x")
+    print(cpu.summary(wall))
 
 
 def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, monitor: LineMonitor,
-                   mesh_notes: list[str]) -> None:
-    rows = join(monitor.spawns, monitor.verdicts)
-    csv_path = write_csv(rows, out / "verdicts.csv")
+                   mesh_notes: list[str]) -> list[str]:
+    """Print the verdict table, write verdicts.csv, report.md and the fillet pictures; the lines woody run adds on
+    stderr: messages the recorder lost, and `OUTPUTS_UNWRITTEN` when --out takes no more (a full disk: the table
+    printed first is then the record of what was graded)."""
+    rows = join(monitor.spawns, monitor.verdicts, gate_commands=monitor.gate_commands)
     info = dict(run_settings(args, fillets))
     info.update({"fillets spawned": len(monitor.spawns), "verdicts": len(monitor.verdicts),
-                 "gate commands": monitor.gate_commands, "sim time (s)": f"{monitor.sim_time:.1f}"})
-    pictures, notes = [], list(mesh_notes)
-    if (out / "line.mcap").exists():
-        try:
-            pictures = write_fillet_pictures(out / "line.mcap", out)
-        except Exception as exc:  # a bag the recorder left cut short still gives the report, without pictures
-            notes.append(f"no fillet pictures: {exc}")
-    report = build_report(rows, out, title="woody line run", run_info=info, notes=notes, extra=pictures)
-    print(verdict_table(rows))
-    print(f"\nbag: {out / 'line.mcap'}\nverdicts: {csv_path}\nreport: {report}\nnode logs: {out / 'logs'}/")
-    for line in mesh_notes:
+                 "gate commands": len(monitor.gate_commands), "sim time (s)": f"{monitor.sim_time:.1f}"})
+    recording, lost = recording_summary(out / "line.mcap")
+    info[RECORDING] = recording
+    problems = [f"recorder: {lost}: the bag misses them (the verdicts do not)"] if lost else []
+    pictures, notes = [], list(mesh_notes) + problems
+    print(verdict_table(rows, divert_unscored=unscored_diverted(info)))
+    print(f"\n{diversion_summary(rows, unscored_diverted(info))}")
+    csv_path = None
+    try:
+        csv_path = write_csv(rows, out / "verdicts.csv")
+        if (out / "line.mcap").exists():
+            try:
+                pictures = write_fillet_pictures(out / "line.mcap", out)
+            except Exception as exc:  # a bag the recorder left cut short still gives the report, without pictures
+                notes.append(f"no fillet pictures: {exc}")
+        report = build_report(rows, out, title="woody line run", run_info=info, notes=notes, extra=pictures)
+    except OSError as exc:
+        kept = "verdicts.csv written, report.md not" if csv_path else "neither verdicts.csv nor report.md written"
+        return problems + [f"{OUTPUTS_UNWRITTEN} {out}/ ({exc.strerror or exc}): {kept}; the table above is what "
+                           "was graded"]
+    print(f"bag: {out / 'line.mcap'} ({recording})\nverdicts: {csv_path}\nreport: {report}\n"
+          f"node logs: {out / 'logs'}/")
+    for line in mesh_notes + speed_notes(args):
         print(line)
+    return problems
+
+
+def recording_summary(bag: Path) -> tuple[str, str | None]:
+    """What the bag holds, for the terminal and report.md ("5133 messages, no message lost in transport"), and what
+    the recorder lost in transport per topic (None when nothing was lost or the bag does not say)."""
+    try:
+        summary = bag_summary(bag)
+    except BagError as exc:
+        return str(exc), None
+    losses = recorded_losses(summary["metadata"])
+    return f"{summary['message_count']} messages, {losses_text(losses)}", losses_text(losses) if losses else None
 
 
 def _finished(monitor: LineMonitor, fillets: int | None, args: argparse.Namespace) -> bool:

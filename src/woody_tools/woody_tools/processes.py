@@ -9,6 +9,8 @@ but locked the same way, so a second run on it is refused rather than mixed.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import fcntl
 import os
 import random
@@ -24,6 +26,58 @@ from typing import IO
 
 MAX_DOMAIN_ID = 232
 """Highest domain id whose Fast DDS ports stay valid."""
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""Signals that end a run the way Ctrl-C does: Ctrl-C, a polite kill, the terminal closed."""
+PARENT_DEATH_SIGNAL = signal.SIGTERM
+"""What a node gets when its parent dies, even by SIGKILL: every node closes cleanly on it (the recorder finalises
+its bag)."""
+_PR_SET_PDEATHSIG = 1
+_LIBC = ctypes.CDLL(None, use_errno=True)
+
+
+class StopRequest:
+    """The first of STOP_SIGNALS received, kept as a flag rather than raised.
+
+    A KeyboardInterrupt raised while `woody run` imports its modules is lost when it lands in an import that
+    catches BaseException (trimesh guards its optional dependencies so); a flag, checked by the run at every
+    stage, is not. After SIGHUP the terminal is gone and writing to it fails, so the process's output goes
+    to ``hangup_log`` (or nowhere) from then on.
+    """
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.hangup_log: Path | None = None
+
+    def install(self) -> None:
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, self._on_signal)
+
+    @property
+    def name(self) -> str:
+        return signal.Signals(self.signum).name if self.signum else ""
+
+    def _on_signal(self, signum: int, _frame: object) -> None:
+        self.signum = self.signum or signum
+        if signum == signal.SIGHUP:
+            _redirect_output(self.hangup_log)
+
+
+STOP = StopRequest()
+"""This process's stop request (`woody run` installs it before its first slow import)."""
+
+
+def _redirect_output(path: Path | None) -> None:
+    """Send file descriptors 1 and 2 to ``path`` (appended), or to /dev/null without one; what Python still
+    buffers goes there too (no flush here: the handler may interrupt a write)."""
+    target = os.devnull
+    if path is not None:
+        with contextlib.suppress(OSError):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            target = str(path)
+    fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
 
 
 class DomainLease:
@@ -124,7 +178,12 @@ def namespace_args(namespace: str) -> list[str]:
 
 
 class NodeProcess:
-    """One entry point running as a child process, its output going to a log file."""
+    """One entry point running as a child process, its output going to a log file.
+
+    The node leads its own process group (a Ctrl-C in the terminal reaches only its parent, which stops the
+    nodes in order) and gets PARENT_DEATH_SIGNAL when its parent dies. The kernel ties that signal to the
+    thread that started the node: start nodes from a thread that lives as long as they should (the main one).
+    """
 
     def __init__(
         self,
@@ -153,7 +212,8 @@ class NodeProcess:
         self._log = open(self.log_path, "w")
         self._sent: set[int] = set()
         self.process = subprocess.Popen(
-            cmd, stdout=self._log, stderr=subprocess.STDOUT, env=child_env, start_new_session=True
+            cmd, stdout=self._log, stderr=subprocess.STDOUT, env=child_env, start_new_session=True,
+            preexec_fn=end_with_parent(os.getpid()),
         )
 
     @property
@@ -181,6 +241,8 @@ class NodeProcess:
             except subprocess.TimeoutExpired:
                 continue
         code = self.process.wait()
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(self.process.pid, signal.SIGKILL)  # a child of the node still in its process group
         self._log.close()
         return code
 
@@ -189,6 +251,16 @@ class NodeProcess:
             return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
         except OSError:
             return ""
+
+
+def end_with_parent(parent_pid: int):
+    """The child's set-up between fork and exec: PARENT_DEATH_SIGNAL when this process dies, however it dies; a
+    parent already gone (it died during the fork) ends the child at once. Only the preloaded prctl is called."""
+    def set_up() -> None:
+        _LIBC.prctl(_PR_SET_PDEATHSIG, int(PARENT_DEATH_SIGNAL), 0, 0, 0)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+    return set_up
 
 
 def wait_for(predicate, timeout: float, interval: float = 0.05) -> bool:

@@ -33,7 +33,8 @@ from woody_sim.line_geometry import TOP_CAMERA_PRESETS
 from woody_sim.meshes import MAX_YAW_SD_DEG
 from woody_sim.sensor_model import PRESETS
 from woody_tools import arguments, line_run
-from woody_tools.line_run import RunRefused, describe_conditions
+from woody_tools.line_run import RunInterrupted, RunRefused, describe_conditions
+from woody_tools.processes import STOP
 from woody_vision.grader_core import SCORES
 
 MAX_THRESHOLD = 1000.0
@@ -52,7 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lanes", type=int, default=3, help="lanes across the belt, 1-6 (default 3)")
     parser.add_argument("--speed-fpm", type=float, default=REFERENCE_SPEED_FPM,
                         help=f"line speed in feet per minute, anywhere in {SPEED_RANGE_FPM[0]:g}.."
-                             f"{SPEED_RANGE_FPM[1]:g} (default 100; commercial lines run 90-140)")
+                             f"{SPEED_RANGE_FPM[1]:g} (default 100; commercial lines run 90-140); a speed outside "
+                             "those the calibration's cuts were fitted on is warned about at the start, at the end "
+                             "and in report.md")
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--fillets", type=int, default=None, help="total fillets to spawn (default 12)")
     group.add_argument("--duration", type=float, default=None, help="sim seconds of spawning instead of a count")
@@ -76,7 +79,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--namespace", default="", metavar="NS",
                         help="run the line under NS (topics NS/..., sim clock NS/clock), so several lines share a "
                              "ROS domain; default: the root namespace")
-    parser.add_argument("--force", action="store_true", help="overwrite a run already in --out")
+    parser.add_argument("--force", action="store_true",
+                        help="overwrite a run already in --out (a run that graded nothing leaves its bag and logs "
+                             "in --out/failed/ and needs no --force)")
     parser.add_argument("--share-domain", action="store_true",
                         help="run on an exported ROS_DOMAIN_ID even when another woody run holds it (they mix)")
     _add_line_arguments(parser)
@@ -127,7 +132,7 @@ def _add_grading_arguments(parser: argparse.ArgumentParser) -> None:
                               "and leading end, three-class grade; the grader's default) or paper (the paper's Φ "
                               "against one threshold)")
     grading.add_argument("--threshold", type=float, default=None, metavar="X",
-                         help="a constant reject cut on the score in use (line: line_threshold [X, 0, 0]; paper: "
+                         help="a constant reject cut on the score in use (line: line_threshold [X, 0, 0, 0, 0]; paper: "
                               "threshold X); default the calibrated cuts of --calibration")
 
 
@@ -155,10 +160,11 @@ def _validate(args: argparse.Namespace) -> None:
 
 
 def _validate_calibration(args: argparse.Namespace) -> None:
-    """Resolve ``--calibration`` to the file the nodes are given, refusing one that is not a calibration."""
+    """Resolve ``--calibration`` to the file the nodes are given, refusing one that is not a calibration; sets
+    ``args.calibrated_speeds``, the line speeds its cuts were fitted on (None when it does not record them)."""
     args.calibration = str(resolve_calibration(args.calibration))
     try:
-        resolved_calibration(args.calibration)
+        args.calibrated_speeds = resolved_calibration(args.calibration).speed_range_fpm
     except ValueError as exc:
         raise RunRefused(str(exc)) from None
 
@@ -258,3 +264,6 @@ def run(args: argparse.Namespace) -> int:
     except RunRefused as exc:
         print(f"woody run: {exc}", file=sys.stderr)
         return 2
+    except RunInterrupted as exc:
+        print(f"woody run: {exc}", file=sys.stderr)
+        return 128 + STOP.signum

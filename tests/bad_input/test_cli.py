@@ -1,0 +1,106 @@
+"""`woody report` never overwrites its input; a failed `woody run` can be retried as typed; a line speed outside
+the calibrated ones is said at the start and in report.md."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from conftest import REPO
+
+from woody_tools.processes import entry_point
+
+pytestmark = pytest.mark.ros
+"""Starts `woody` and, for `woody run`, every node entry point."""
+
+SAMPLE = REPO / "bags" / "sample"
+
+
+def woody(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
+    return subprocess.run([entry_point("woody"), *args], capture_output=True, text=True, timeout=timeout, env=env,
+                          stdin=subprocess.DEVNULL)
+
+
+def run_with_a_cut_bag(tmp_path: Path) -> Path:
+    """A run folder (the sample's files) whose bag was cut short after the run wrote its verdicts."""
+    run = tmp_path / "run"
+    run.mkdir()
+    for name in ("verdicts.csv", "report.md"):
+        shutil.copy(SAMPLE / name, run / name)
+    data = (SAMPLE / "line.mcap").read_bytes()
+    (run / "line.mcap").write_bytes(data[:int(len(data) * 0.6)])
+    return run
+
+
+def test_a_report_of_a_cut_bag_leaves_the_runs_own_files_alone(tmp_path):
+    run = run_with_a_cut_bag(tmp_path)
+    before = {name: (run / name).read_bytes() for name in ("verdicts.csv", "report.md")}
+    result = woody("report", str(run / "line.mcap"), timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert {name: (run / name).read_bytes() for name in before} == before
+    out = run / "line-report"
+    assert result.stdout.strip() == f"report: {out / 'report.md'}"
+    graded = [row for row in (out / "verdicts.csv").read_text().splitlines() if ",missing," not in row]
+    assert len(graded) < len(before["verdicts.csv"].decode().splitlines())  # the readable part only
+    assert "the bag ends early" in (out / "report.md").read_text()
+
+    again = woody("report", str(run / "line.mcap"), "--out", str(tmp_path / "elsewhere"), timeout=120)
+    assert again.returncode == 0 and (tmp_path / "elsewhere" / "report.md").exists(), again.stderr
+
+
+@pytest.mark.parametrize("source", ["line.mcap", "verdicts.csv"])
+def test_a_report_into_the_sources_folder_is_refused(tmp_path, source):
+    run = run_with_a_cut_bag(tmp_path)
+    before = {p.name: p.read_bytes() for p in run.iterdir()}
+    result = woody("report", str(run / source), "--out", f"{run}/.", timeout=120)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert lines[0].startswith("woody report: --out ") and f"is the folder of {source}" in lines[0]
+    assert {p.name: p.read_bytes() for p in run.iterdir()} == before
+
+
+def bad_calibration(tmp_path: Path) -> Path:
+    """A calibration woody run reads but the grader refuses (its severe cut above the moderate one)."""
+    import yaml
+
+    data = yaml.safe_load((REPO / "config" / "calibration.yaml").read_text())
+    grader = data["/**/grader"]["ros__parameters"]
+    grader["severe_threshold"], grader["moderate_threshold"] = grader["moderate_threshold"], grader["severe_threshold"]
+    path = tmp_path / "bad-calibration.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_a_failed_run_that_graded_nothing_can_be_retried_as_typed(tmp_path):
+    out = tmp_path / "run"
+    failed = woody("run", "--fillets", "3", "--out", str(out), "--calibration", str(bad_calibration(tmp_path)))
+    assert failed.returncode == 1, failed.stderr[-2000:]
+    assert "node 'grader' exited with code 2" in failed.stderr
+    assert (f"woody run: nothing was graded: the run's bag and logs are in {out / 'failed'}/, and the same command "
+            "can run again") in failed.stderr
+    assert (out / "failed" / "line.mcap").exists() and (out / "failed" / "logs" / "grader.log").exists()
+    assert f"last lines of {out / 'failed' / 'logs' / 'grader.log'}" in failed.stderr
+
+    retried = woody("run", "--fillets", "3", "--out", str(out))
+    assert retried.returncode == 0, retried.stderr[-2000:]
+    assert len((out / "verdicts.csv").read_text().splitlines()) == 1 + 3
+    refused = woody("run", "--fillets", "3", "--out", str(out), timeout=120)  # a run that graded is kept
+    assert refused.returncode == 2 and "already holds a run (line.mcap); pass --force" in refused.stderr
+
+
+def test_a_speed_outside_the_calibrated_ones_is_warned_about_at_the_start_and_in_the_report(tmp_path):
+    out = tmp_path / "run"
+    result = woody("run", "--fillets", "3", "--speed-fpm", "200", "--out", str(out))
+    assert result.returncode == 0, result.stderr[-2000:]
+    warning = ("line speed 200 FPM is outside the 90..140 FPM the calibration's cuts were fitted on: the grade is "
+               "not validated at this speed")
+    first = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")][0]
+    assert first == f"woody run: {warning}"  # before the line starts
+    report = (out / "report.md").read_text()
+    assert f"- {warning}" in report and "| calibrated line speeds (FPM) | 90..140 |" in report
+    again = woody("report", str(out / "line.mcap"), timeout=120)  # the bag carries it too
+    assert again.returncode == 0 and f"- {warning}" in (out / "line-report" / "report.md").read_text()
