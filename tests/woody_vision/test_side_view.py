@@ -301,6 +301,24 @@ def test_one_lost_frame_and_a_slow_idle_camera_before_the_passage_change_nothing
     assert after_idle.complete and after_idle.nmdm == pytest.approx(whole.nmdm, abs=1e-12)
 
 
+def test_frames_skipped_on_purpose_are_no_gap():
+    """A caller that follows the fillet at a slower rate first (the sweeps' side view) says so per frame; the
+    same steps unannounced are frames lost."""
+    whole = measure(set())
+    slow = {i for i in range(1, 16) if i % 4}  # the early frames at a quarter of the rate
+
+    def passage(announced: bool) -> SideMeasurement:
+        tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
+        out = [m for i, centre in enumerate(disc_passage()) if i not in slow
+               for m in tracker.update(with_disc(centre, 20.0), i * DT, planned_step=announced and i - 1 in slow)]
+        (m,) = out + flush(tracker, len(disc_passage()) * DT)
+        return m
+
+    planned = passage(announced=True)
+    assert planned.complete and planned.nmdm == pytest.approx(whole.nmdm, abs=1e-12)
+    assert not passage(announced=False).complete
+
+
 def test_frames_lost_while_the_passage_ends_count_too():
     tracker = SidePassageTracker(AXLE, R, background=SCENE.background())
     for i, centre in enumerate(disc_passage()):

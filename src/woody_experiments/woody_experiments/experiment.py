@@ -286,6 +286,8 @@ class _SideView:
         self.next_time = 0.0
         self.frames = 0
         self.result = None
+        self._planned = False
+        """The step into the coming frame is one at the far rate: frames skipped on purpose, not lost."""
 
     def due(self, now: float) -> bool:
         return self.result is None and now + 1e-9 >= self.next_time
@@ -295,13 +297,14 @@ class _SideView:
         gone = self.fillet_id not in world.fillets
         near = gone or world.is_dynamic(self.fillet_id)
         self.next_time += 1.0 / (self.rate_hz if near else SIDE_FAR_RATE_HZ)
+        planned, self._planned = self._planned, not near
         if not gone and near:
             com = world.center_of_mass(self.fillet_id)
             ax, az = self.axle
             gone = com[2] < az and math.hypot(com[0] - ax, com[2] - az) > SIDE_DONE_DISTANCE
         frame = self.background if gone else renderer.render_side(poses or world.segment_poses())
         self.frames += 0 if gone else 1
-        self._measure(frame, now)
+        self._measure(frame, now, planned)
 
     def finish(self, now: float) -> None:
         """The run ended with the passage still open: close it with empty frames."""
@@ -309,8 +312,8 @@ class _SideView:
             for _ in range(self.tracker.end_frames):
                 self._measure(self.background, now)
 
-    def _measure(self, frame: np.ndarray, now: float) -> None:
-        for measurement in self.tracker.update(frame, now):
+    def _measure(self, frame: np.ndarray, now: float, planned: bool = False) -> None:
+        for measurement in self.tracker.update(frame, now, planned):
             self.result = measurement
 
 

@@ -20,7 +20,9 @@ in the frames that never came (a grader that fell behind, a network burst).
 Such a passage gives a measurement with NMDM, MDM and BE absent (NaN) and the
 reason, never the values of the frames that were seen. The step into a
 passage's first frame does not count: the side camera runs slower while its
-view is empty.
+view is empty. Nor does a step its caller planned (``update(..., planned_step=True)``):
+the sweeps' side view follows a fillet along the belt at a slower rate on
+purpose.
 """
 
 from __future__ import annotations
@@ -308,9 +310,10 @@ class SidePassageTracker:
         self._last_stamp = None
         self.interval = math.inf
 
-    def update(self, rgb: np.ndarray, stamp: float) -> list[SideMeasurement]:
-        """Feed one side frame; returns the measurements of passages that ended with it."""
-        self._note_step(stamp)
+    def update(self, rgb: np.ndarray, stamp: float, planned_step: bool = False) -> list[SideMeasurement]:
+        """Feed one side frame; returns the measurements of passages that ended with it. ``planned_step``: the
+        step from the previous frame is the caller's own choice of rate, not frames lost."""
+        self._note_step(stamp, planned_step)
         if self.background is None or self.background.shape != rgb.shape:
             self.background = rgb.copy()
             self._passages = []
@@ -333,12 +336,15 @@ class SidePassageTracker:
         self._passages = [p for p in self._passages if p.unseen < self.end_frames]
         return [m for m in (self._measure(p) for p in done) if m is not None]
 
-    def _note_step(self, stamp: float) -> None:
-        """Learn the frame interval and charge the step since the last frame to every passage in progress."""
+    def _note_step(self, stamp: float, planned: bool) -> None:
+        """Learn the frame interval and charge the step since the last frame (unless planned) to every passage
+        in progress."""
         step = stamp - self._last_stamp if self._last_stamp is not None else 0.0
         self._last_stamp = stamp
         if step > 0.0:
             self.interval = min(self.interval, step)
+        if planned:
+            return
         for passage in self._passages:
             passage.longest_step = max(passage.longest_step, step)
 
