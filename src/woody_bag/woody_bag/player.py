@@ -139,15 +139,17 @@ def skip_live(node, args, types: dict[str, type], clock_mode: str | None, stop: 
 
 
 def _discover(node, limit: float, stop: Stop, settle: float = 0.5) -> None:
-    """Wait until other nodes have been seen and the set of nodes has not changed for ``settle`` s (or ``limit``)."""
+    """Wait until other nodes have been seen and the graph (nodes and topics) has not changed for ``settle`` s (or
+    ``limit``): a node is known before its publishers are."""
     deadline = time.monotonic() + limit
-    seen: set = set()
+    seen: tuple = ()
     changed = time.monotonic()
     while not stop and time.monotonic() < deadline:
         names = {n for n in node.get_node_names_and_namespaces() if n[0] != node.get_name()}
-        if names != seen:
-            seen, changed = names, time.monotonic()
-        elif seen and time.monotonic() - changed >= settle:
+        graph = (frozenset(names), frozenset(t for t, _ in node.get_topic_names_and_types()))
+        if graph != seen:
+            seen, changed = graph, time.monotonic()
+        elif names and time.monotonic() - changed >= settle:
             return
         stop.event.wait(0.1)
 
