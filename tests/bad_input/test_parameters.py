@@ -3,9 +3,10 @@
 A refusal is one line, ``<program>: ...``, exit code 2, no traceback, and nothing claimed: the
 command runs in an empty folder that stays empty (the recorder is pointed at a bag in it, `woody
 run` at an output folder in it). Unknown names are refused with the names the node knows (the list
-its ``--help`` prints); stray arguments print the usage; a NaN, an empty list or a value outside the
-range is refused with the same range in every node that takes the parameter; every parameter is
-read-only, so setting one on a running node (what ``ros2 param set`` does) is refused with the reason.
+its ``--help`` prints, with the values the overrides give); stray arguments print the usage; a NaN,
+an empty list or a value outside the range is refused with the same range in every node that takes
+the parameter; every parameter is read-only, so setting one on a running node (what ``ros2 param
+set`` does) is refused with the reason.
 
 The refusals run as one batch per table, four processes at a time (each takes 1-2 s alone).
 More `woody run` refusals (``--k 0 nan``, ``--speed-fpm 0.5``, the line options) are in
@@ -57,6 +58,7 @@ NODE_REFUSALS = {  # command: what its one line says
     ros_args("line_sim", "k_values:=[-5.0]"): "k_values must be a non-empty list of finite values >= 0, got [-5.0]",
     ros_args("recorder", "compression:=bogus"): "unknown compression 'bogus' (zstd, lz4 or none)",
     ros_args("recorder", "queue_depth:=0"): "queue_depth, max_buffer_mb and chunk_size must be >= 1",
+    ("grader", "--help", "--ros-args", "-p", "line_sped_fpm:=130"): "unknown parameter line_sped_fpm; grader knows",
     ("line_sim", "--ros-args", "--params-file", "missing.yaml"):
         "bad --ros-args: Couldn't parse params file: '--params-file missing.yaml'",
 }
@@ -72,6 +74,10 @@ RUN_REFUSALS = {  # `woody run` options that become node parameters: refused bef
 }
 
 
+CONFIGURED_HELP = ("reject_gate", "--help", "--ros-args", "-p", "line_speed_fpm:=130", "-p", "lanes:=2")
+"""``--help`` with overrides describes the node as they configure it."""
+
+
 @pytest.fixture(scope="module")
 def domain():
     with lease_domain({}) as lease:
@@ -81,7 +87,8 @@ def domain():
 @pytest.fixture(scope="module")
 def refused(domain) -> dict:
     """Every command of both tables and every node's ``--help`` and stray argument, run once."""
-    commands = [*NODE_REFUSALS, *((node, "--help") for node in NODES), *((node, "--lanes", "3") for node in NODES)]
+    commands = [*NODE_REFUSALS, *((node, "--help") for node in NODES), *((node, "--lanes", "3") for node in NODES),
+                CONFIGURED_HELP]
     outcomes = run_entries(commands, domain, timeout=60)
     runs = [("woody", "run", "--fillets", "1", "--out", "run", *options) for options in RUN_REFUSALS]
     outcomes += run_entries(runs, None, timeout=60)
@@ -113,6 +120,12 @@ def test_an_unknown_name_is_refused_with_the_names_help_lists(refused, node):
     shown = refused[(node, "--help")]
     assert shown.code == 0 and shown.stdout.startswith(f"usage: {node} [--ros-args "), shown.lines
     assert len(known) > 4 and {name for name in known if not re.search(rf"\b{name}\b", shown.stdout)} == set()
+
+
+def test_help_with_overrides_shows_the_values_they_give(refused):
+    outcome = refused[CONFIGURED_HELP]
+    assert outcome.code == 0, outcome.lines
+    assert "\n  line_speed_fpm = 130.0 [1, 400]: " in outcome.stdout and "\n  lanes = 2 [1, 6]: " in outcome.stdout
 
 
 @pytest.mark.parametrize("node", NODES)

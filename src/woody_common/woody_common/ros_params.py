@@ -111,7 +111,7 @@ def init_checked(name: str, args: list[str] | None, **init_kwargs) -> int | None
         if extra and extra[0] not in ("-h", "--help"):
             print(f"{name}: unexpected argument {' '.join(extra)}\n{usage(name)}", file=sys.stderr)
             return 2
-        rclpy.init(args=args if not extra else argv[:1], **init_kwargs)
+        rclpy.init(args=argv, **init_kwargs)  # with --help too: it describes the node as configured
     except Exception as exc:  # noqa: BLE001 - rclpy's RCLError / RCLInvalidROSArgsError on a malformed --ros-args
         reason = re.sub(r"^.*?: (?=Couldn't)|\. Error:.*$", "", str(exc).splitlines()[0])
         print(f"{name}: bad --ros-args: {reason}", file=sys.stderr)
