@@ -1,7 +1,7 @@
 """The processes of `woody run`: the whole line as separate processes on a private ROS domain.
 
 Starts recorder, segmenter, grader, reject_gate and line_sim, watches ground
-truth, verdicts and /clock from this process to show progress, stops
+truth, verdicts and the top camera's stamps from this process to show progress, stops
 everything when every fillet is graded (or on Ctrl-C, or when a node dies),
 and leaves the bag, verdicts.csv and report.md in the output folder. The
 options are :mod:`woody_tools.commands.run`'s.
@@ -138,7 +138,7 @@ class LineMonitor:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
-        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import CameraInfo
 
         from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
 
@@ -158,12 +158,14 @@ class LineMonitor:
         """(lane, fillet id) of every GateCommand: the fillets the gate acted on in time."""
         self.sim_time = 0.0
         self.first_clock: tuple[float, float] | None = None
-        """(wall monotonic, sim s) of the first /clock: when the line itself started, after the nodes' start-up."""
+        """(wall monotonic, sim s) of the first top camera frame: when the line itself started, after the nodes'
+        start-up. Sim time is followed by the frames' 30 Hz camera_info, not /clock's 200+ Hz: each message costs
+        this process a callback."""
         self.last_clock: tuple[float, float] | None = None
         self.node.create_subscription(FilletSpawn, topics.GROUND_TRUTH, self._on_spawn, latched)
         self.node.create_subscription(FilletVerdict, topics.VERDICTS, self._on_verdict, reliable)
         self.node.create_subscription(GateCommand, topics.GATE_COMMANDS, self._on_gate, reliable)
-        self.node.create_subscription(Clock, "clock" if namespace.strip("/") else "/clock", self._on_clock, 10)
+        self.node.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self._on_clock, 10)
 
     def _on_spawn(self, msg) -> None:
         self.spawns.append(spawn_from_msg(msg))
@@ -175,13 +177,13 @@ class LineMonitor:
         self.gate_commands.add((msg.lane, msg.fillet_id))
 
     def _on_clock(self, msg) -> None:
-        self.sim_time = stamp_to_seconds(msg.clock)
+        self.sim_time = stamp_to_seconds(msg.header.stamp)
         self.last_clock = (time.monotonic(), self.sim_time)
         self.first_clock = self.first_clock or self.last_clock
 
     def line_rtf(self, nodes_started: float) -> tuple[float, float] | None:
-        """(sim s per wall s since the line's first /clock, wall s from ``nodes_started`` to it); None before two
-        clocks."""
+        """(sim s per wall s since the line's first frame, wall s from ``nodes_started`` to it); None before two
+        frames."""
         if self.first_clock is None or self.last_clock[0] <= self.first_clock[0]:
             return None
         wall = self.last_clock[0] - self.first_clock[0]
