@@ -165,9 +165,9 @@ class LineSim(Node):
                                         "subscribers listen to the top depth image.", 0, 100)
         self.wait_side_subscribers = declare(self, "wait_for_side_subscribers", 0, "... and this many to the side "
                                              "camera image (a grader subscribes once its kernels are warm).", 0, 100)
-        self.wait_every_topic = declare(self, "wait_for_every_topic", False, "... and one subscriber to every "
-                                        "topic this node publishes (a recorder of all topics); without it the line "
-                                        "gives late joiners 1 s once the cameras have their subscribers.")
+        self.wait_recorder = declare(self, "wait_for_recorder", "", "... and until the node of this name (a "
+                                     "recorder of all topics) subscribes to every topic this node publishes; '' = "
+                                     "give late joiners 1 s once the cameras have their subscribers.")
 
     def _declare_conditions(self) -> tuple[str, LineConditions]:
         """The line preset and the placement parameters, whose defaults are the preset's values: ``line``
@@ -473,22 +473,28 @@ class LineSim(Node):
 
     def _wait_for_subscribers(self, executor) -> None:
         """Hold until the consumers the start-gate parameters name are there (each costs at most a discovery)."""
-        wanted = [(self.depth_pub, self.wait_subscribers), (self.side_pub, self.wait_side_subscribers)]
-        if self.wait_every_topic:
-            wanted += [(publisher, 1) for publisher in self._line_publishers]
-        wanted = [(publisher, count) for publisher, count in wanted if count]
-        if not wanted:
+        wanted = [(p, n) for p, n in ((self.depth_pub, self.wait_subscribers),
+                                      (self.side_pub, self.wait_side_subscribers)) if n]
+        if not (wanted or self.wait_recorder):
             return
         self.get_logger().info("waiting for subscribers: " + ", ".join(
-            f"{count} on {publisher.topic_name}" for publisher, count in wanted))
-        while not self._stop.is_set() and any(p.get_subscription_count() < n for p, n in wanted):
+            [f"{n} on {p.topic_name}" for p, n in wanted] + ([f"{self.wait_recorder} on every topic of this node"]
+                                                             if self.wait_recorder else [])))
+        while not self._stop.is_set() and (any(p.get_subscription_count() < n for p, n in wanted)
+                                           or not self._recorder_listens()):
             executor.spin_once(timeout_sec=0.02)
-        if self.wait_every_topic:
+        if self.wait_recorder:
             return
         # Give late joiners (a recorder discovering topics) a moment to subscribe to the rest.
         deadline = time.monotonic() + 1.0
         while not self._stop.is_set() and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
+
+    def _recorder_listens(self) -> bool:
+        """The node ``wait_for_recorder`` names subscribes to every topic this node publishes (or none is named)."""
+        return not self.wait_recorder or all(
+            any(info.node_name == self.wait_recorder for info in self.get_subscriptions_info_by_topic(p.topic_name))
+            for p in self._line_publishers)
 
     def close(self) -> None:
         self.renderer.close()

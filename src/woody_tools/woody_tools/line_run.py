@@ -22,7 +22,7 @@ from pathlib import Path
 
 from woody_bag.errors import BagError
 from woody_bag.recorder_node import recorder_failure
-from woody_bag.summary import bag_summary, losses_text, recorded_losses
+from woody_bag.summary import bag_summary, losses_text, recorded_losses, recording_text
 from woody_common import topics
 from woody_common.line import fpm_to_mps, spacing_at_rate
 from woody_common.stamps import stamp_to_seconds
@@ -31,6 +31,7 @@ from woody_experiments.messages import spawn_from_msg, verdict_from_msg
 from woody_experiments.run_report import (
     CALIBRATED_SPEEDS,
     MATCH_TOLERANCE_S,
+    RECORDING,
     UNSCORED_DIVERTED,
     Spawn,
     Verdict,
@@ -60,8 +61,6 @@ HANGUP_LOG = "woody_run.log"
 """In the run's logs/: what woody run prints once its terminal has closed (SIGHUP)."""
 INTERRUPTED = "interrupted"
 """Why the watch ended early: a stop signal (STOP)."""
-RECORDING = "recording"
-"""report.md's setting: messages in the bag and those the recorder lost in transport, per topic."""
 OUTPUTS_UNWRITTEN = "cannot write to"
 """Begins woody run's line when --out takes no more (a full disk); the exit code is then 1."""
 
@@ -327,7 +326,7 @@ def _sim_params(args: argparse.Namespace, fillets: int | None) -> dict[str, obje
         "lanes": args.lanes, "line_speed_fpm": args.speed_fpm, "k_values": [float(k) for k in args.k],
         "meshes": args.meshes, "seed": args.seed, "fillets": fillets or 0, "spawn_duration_s": args.duration or 0.0,
         "realtime": args.realtime, "side_rate_hz": args.side_rate, "wait_for_subscribers": 2,
-        "wait_for_side_subscribers": 2, "wait_for_every_topic": True,
+        "wait_for_side_subscribers": 2, "wait_for_recorder": "recorder",
         "max_lead_s": MAX_LEAD_S, "top_camera": args.top_camera, "sensor": args.sensor, "line": args.line,
         "lane_pitch_m": args.lane_pitch_m, **{name: float(value) for name, value in args.placement.items()},
     }
@@ -535,7 +534,7 @@ def recording_summary(bag: Path) -> tuple[str, str | None]:
     except BagError as exc:
         return str(exc), None
     losses = recorded_losses(summary["metadata"])
-    return f"{summary['message_count']} messages, {losses_text(losses)}", losses_text(losses) if losses else None
+    return recording_text(summary), losses_text(losses) if losses else None
 
 
 def _finished(monitor: LineMonitor, fillets: int | None, args: argparse.Namespace) -> bool:
