@@ -123,6 +123,11 @@ def recorded_losses(metadata: dict[str, dict[str, str]]) -> dict[str, int] | Non
     return {topic: int(n) for topic, n in record.items() if topic.startswith("/")}
 
 
+def recording_text(summary: dict[str, Any]) -> str:
+    """A `bag_summary` in one phrase for the terminal and report.md: "5133 messages, no message lost in transport"."""
+    return f"{summary['message_count']} messages, {losses_text(recorded_losses(summary['metadata']))}"
+
+
 def losses_text(losses: dict[str, int] | None) -> str:
     """``"no message lost in transport"``, ``"19 messages lost in transport (/clock 13, ...)"`` or, for a bag
     without `LOSSES_RECORD` (its recorder did not finish it, or another recorder wrote it), that they are not

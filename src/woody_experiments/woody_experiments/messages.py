@@ -13,10 +13,10 @@ from pathlib import Path
 from woody_bag.errors import BagError
 from woody_bag.reader import read_bag
 from woody_bag.schemas import decode
-from woody_bag.summary import bag_metadata, bag_topics
+from woody_bag.summary import bag_summary, bag_topics, recording_text
 from woody_common import topics
 from woody_common.stamps import stamp_to_seconds
-from woody_experiments.run_report import Spawn, Verdict, join
+from woody_experiments.run_report import RECORDING, Spawn, Verdict, join
 
 
 def spawn_from_msg(msg) -> Spawn:
@@ -66,10 +66,12 @@ def rows_from_bag(path: Path, woody_k: float = 50.0) -> tuple[list[dict], str | 
 
 def settings_from_bag(path: Path, rows: list[dict]) -> dict | None:
     """The settings table of the run that recorded the bag (the recorder's ``woody.run`` record)."""
-    record = bag_metadata(path).get("woody", {}).get("run_settings")
+    summary = bag_summary(path)
+    record = summary["metadata"].get("woody", {}).get("run_settings")
     if not record:
         return None
     settings = json.loads(record)
+    settings[RECORDING] = recording_text(summary)
     settings["fillets spawned"] = sum(1 for r in rows if r.get("truth"))
     settings["verdicts"] = sum(1 for r in rows if r["verdict"] != "missing")
     return settings

@@ -33,6 +33,10 @@ NUMERIC_COLUMNS = {"k", "speed_fpm", "phi", "hu_term", "solidity_term", "nmdm", 
 UNSCORED_DIVERTED = "unscored fillets diverted"
 """Run setting (report.md's table, the bag's ``woody.run`` record): reject_gate's ``divert_unscored``."""
 
+RECORDING = "recording"
+"""Run setting: the messages in the run's bag and those its recorder lost in transport, per topic
+(`woody_bag.summary.recording_text`)."""
+
 CALIBRATED_SPEEDS = "calibrated line speeds (FPM)"
 """Run setting: the lowest and highest line speed the calibration's cuts were fitted on, "LOW..HIGH"."""
 
