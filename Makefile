@@ -22,8 +22,11 @@ test-unit: setup lint
 
 bench: setup
 	$(VENV)/bin/woody bench sim
+	$(VENV)/bin/woody bench sim --lanes 6 --speed-fpm 130
 	$(VENV)/bin/woody bench vision
 	$(VENV)/bin/woody bench graph
+	$(VENV)/bin/woody bench graph --lanes 6 --speed-fpm 130
+	$(VENV)/bin/woody bench sweep
 
 clean:
 	rm -rf ros_ws/build ros_ws/log

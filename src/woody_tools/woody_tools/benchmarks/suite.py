@@ -1,4 +1,4 @@
-"""`woody bench sim`, `woody bench vision` and `woody bench graph`: the speed figures of docs/performance.md.
+"""`woody bench sim|vision|graph|sweep`: the speed figures of docs/performance.md.
 
 Each benchmark calls the same modules the nodes use; the end-to-end figures
 (line_sim's real-time factor, verdict latency, `woody run`, a sweep) start the
@@ -14,6 +14,7 @@ compared with pybullet's TinyRenderer on the same scene.
 from __future__ import annotations
 
 import csv
+import math
 import re
 import statistics
 import subprocess
@@ -91,8 +92,8 @@ def bench_sim(seconds: float, lanes: int = LANES, speed_fpm: float = REFERENCE_S
 
 
 def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, fillets_per_lane: int = 6) -> dict:
-    """`woody run` (the whole graph with the recorder) at ``lanes`` and ``speed_fpm``, and a sweep of the default
-    grid, as subprocesses."""
+    """`woody run` (the whole graph with the recorder) at ``lanes`` and ``speed_fpm``, as a subprocess: its speed,
+    its node start-up and whether every fillet got its verdict."""
     fillets = fillets_per_lane * lanes
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run"
@@ -101,16 +102,31 @@ def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, fill
                               capture_output=True, text=True)
         with open(out / "verdicts.csv", newline="") as rows:
             graded = sum(1 for row in csv.DictReader(rows) if row["verdict"])
+    rtf = re.search(r"wall: rtf ([0-9.]+)x", demo.stdout)
+    started = re.search(r"the line itself, after ([0-9.]+) s of node start-up: rtf ([0-9.]+)x", demo.stdout)
+    if rtf is None or started is None:
+        raise RuntimeError(f"woody run did not report its speed:\n{demo.stdout[-2000:]}")
+    lost = re.search(r"recorder: ([0-9]+) messages lost", demo.stdout + demo.stderr)
+    return {"lanes": lanes, "speed_fpm": speed_fpm, "woody_run_fillets": fillets, "woody_run_verdicts": graded,
+            "woody_run_rtf": float(rtf.group(1)), "woody_run_line_rtf": float(started.group(2)),
+            "woody_run_startup_s": float(started.group(1)),
+            "woody_run_recorder_lost": int(lost.group(1)) if lost else 0}
+
+
+def bench_sweep() -> dict:
+    """`woody sweep` of the default grid (its 30 meshes, 9 stiffnesses, 2 speeds, 3 lanes, side view on), as a
+    subprocess: evaluations per minute, and one warm worker's rate in the same sweep."""
+    with tempfile.TemporaryDirectory() as tmp:
         sweep = subprocess.run([entry_point("woody"), "sweep", "--no-report", "--out", str(Path(tmp) / "sweep")],
                                check=True, capture_output=True, text=True)
-    rtf = re.search(r"wall: rtf ([0-9.]+)x", demo.stdout)
-    line = re.search(r"the line itself, after ([0-9.]+) s of node start-up: rtf ([0-9.]+)x", demo.stdout)
-    rate = re.search(r"= ([0-9.]+) /min", sweep.stdout + sweep.stderr)
-    if rtf is None or line is None or rate is None:
-        raise RuntimeError("woody run or woody sweep did not report its speed")
-    return {"lanes": lanes, "speed_fpm": speed_fpm, "woody_run_fillets": fillets, "woody_run_verdicts": graded,
-            "woody_run_rtf": float(rtf.group(1)), "woody_run_line_rtf": float(line.group(2)),
-            "woody_run_startup_s": float(line.group(1)), "sweep_evals_per_min": float(rate.group(1))}
+    text = sweep.stdout + sweep.stderr
+    rate = re.search(r"([0-9]+) fillet evaluations in ([0-9.]+) s = ([0-9.]+) /min", text)
+    alone = re.search(r"against ([0-9.]+) /min with one warm worker alone", text)
+    if rate is None:
+        raise RuntimeError(f"woody sweep did not report its speed:\n{text[-2000:]}")
+    return {"sweep_evaluations": int(rate.group(1)), "sweep_wall_s": float(rate.group(2)),
+            "sweep_evals_per_min": float(rate.group(3)),
+            "sweep_one_worker_evals_per_min": float(alone.group(1)) if alone else math.nan}
 
 
 def line_sim_rtf(seconds: float, lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM,

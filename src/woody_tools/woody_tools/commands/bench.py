@@ -1,4 +1,4 @@
-"""`woody bench sim`, `woody bench vision` and `woody bench graph`: the speed figures of docs/performance.md.
+"""`woody bench sim|vision|graph|sweep`: the speed figures of docs/performance.md.
 
 The benchmarks themselves are :mod:`woody_tools.benchmarks`; each figure is also
 printed divided by a fixed reference workload (:func:`woody_tools.benchmarks.suite.reference_ms`).
@@ -12,7 +12,7 @@ from pathlib import Path
 
 from woody_common.line import LANES, MAX_LANES, REFERENCE_SPEED_FPM, SPEED_RANGE_FPM
 from woody_tools import arguments
-from woody_tools.benchmarks.suite import bench_graph, bench_sim, bench_vision, reference_ms, with_reference
+from woody_tools.benchmarks.suite import bench_graph, bench_sim, bench_sweep, bench_vision, reference_ms, with_reference
 
 LANE_COUNT = arguments.number(lambda n: n == int(n) and 1 <= n <= MAX_LANES, f"must be a whole number 1..{MAX_LANES}")
 LINE_SPEED = arguments.number(lambda s: SPEED_RANGE_FPM[0] <= s <= SPEED_RANGE_FPM[1],
@@ -20,7 +20,7 @@ LINE_SPEED = arguments.number(lambda s: SPEED_RANGE_FPM[0] <= s <= SPEED_RANGE_F
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("target", choices=["sim", "vision", "graph"], help="what to benchmark")
+    parser.add_argument("target", choices=["sim", "vision", "graph", "sweep"], help="what to benchmark")
     parser.add_argument("--json", dest="json_path", default=None, help="also write the figures to this JSON file")
     parser.add_argument("--seconds", type=float, default=10.0, help="sim seconds of each timed run (default 10)")
     parser.add_argument("--frames", type=int, default=300, help="frames per vision timing run (default 300)")
@@ -34,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
     reference = reference_ms()
     line = {"lanes": int(args.lanes), "speed_fpm": args.speed_fpm}
     benches = {"sim": lambda: bench_sim(args.seconds, **line),
-               "vision": lambda: bench_vision(args.frames, args.seconds), "graph": lambda: bench_graph(**line)}
+               "vision": lambda: bench_vision(args.frames, args.seconds), "graph": lambda: bench_graph(**line),
+               "sweep": bench_sweep}
     figures = benches[args.target]()
     figures = {"reference_ms": reference, **with_reference(figures, 0.5 * (reference + reference_ms()))}
     width = max(len(k) for k in figures)
