@@ -39,9 +39,14 @@ def ros_args(node: str, *overrides: str) -> tuple[str, ...]:
 
 
 NODE_REFUSALS = {  # command: what its one line says
+    # a typo in a name, a malformed override, a params file that is not there
     **{ros_args(node, "line_sped_fpm:=130"): "invalid parameter: unknown parameter line_sped_fpm; " for node in NODES},
+    ("grader", "--help", "--ros-args", "-p", "line_sped_fpm:=130"): "unknown parameter line_sped_fpm; grader knows",
     **{ros_args(node, "lanes:=["): f"bad --ros-args: {UNCLOSED}" for node in NODES},
     **{ros_args(node, "lanes"): "bad --ros-args: Couldn't parse parameter override rule: '-p lanes'" for node in NODES},
+    ("line_sim", "--ros-args", "--params-file", "missing.yaml"):
+        "bad --ros-args: Couldn't parse params file: '--params-file missing.yaml'",
+    # empty, NaN, infinite or mistyped values
     ros_args("line_sim", "k_values:=[]"): "parameter k_values: needs a value like [0.0, 100.0], got an empty",
     ros_args("reject_gate", "gate_distance_m:=[]"): "parameter gate_distance_m: needs a value like [0.6], got an",
     ros_args("grader", "line_threshold:=[]"): "parameter line_threshold: needs a value like [",
@@ -49,18 +54,32 @@ NODE_REFUSALS = {  # command: what its one line says
     ros_args("reject_gate", "gate_distance_m:=[.nan]"): "parameter gate_distance_m: must be a finite number",
     ros_args("grader", "line_threshold:=[.inf, 0.0, 0.0]"): "parameter line_threshold: must be a finite number",
     ros_args("line_sim", "line_speed_fpm:=.nan"): "Parameter line_speed_fpm out of range Min: 1.0, Max: 400.0",
+    ros_args("segmenter", "lanes:=2.5"): "Trying to set parameter 'lanes' to '2.5' of type 'DOUBLE', expecting",
+    # out of range: one range for a parameter in every node that takes it
     ros_args("line_sim", "line_speed_fpm:=0.5"): "Parameter line_speed_fpm out of range Min: 1.0, Max: 400.0",
     ros_args("reject_gate", "line_speed_fpm:=0.5"): "Parameter line_speed_fpm out of range Min: 1.0, Max: 400.0",
     ros_args("reject_gate", "line_speed_fpm:=1000"): "Parameter line_speed_fpm out of range Min: 1.0, Max: 400.0",
     **{ros_args(node, "lanes:=7"): "Parameter lanes out of range. Min: 1, Max: 6"
        for node in ("line_sim", "segmenter", "grader", "reject_gate")},
-    ros_args("segmenter", "lanes:=2.5"): "Trying to set parameter 'lanes' to '2.5' of type 'DOUBLE', expecting",
-    ros_args("line_sim", "k_values:=[-5.0]"): "k_values must be a non-empty list of finite values >= 0, got [-5.0]",
-    ros_args("recorder", "compression:=bogus"): "unknown compression 'bogus' (zstd, lz4 or none)",
+    ros_args("line_sim", "k_values:=[-1.0]"): "k_values must be a non-empty list of finite values >= 0, got [-1.0]",
+    ros_args("segmenter", "min_area_px:=0"): "Parameter min_area_px out of range. Min: 1, Max: 100000",
+    ros_args("grader", "threshold:=-1.0"): "Parameter threshold out of range Min: 0.001, Max: 1000.0",
     ros_args("recorder", "queue_depth:=0"): "queue_depth, max_buffer_mb and chunk_size must be >= 1",
-    ("grader", "--help", "--ros-args", "-p", "line_sped_fpm:=130"): "unknown parameter line_sped_fpm; grader knows",
-    ("line_sim", "--ros-args", "--params-file", "missing.yaml"):
-        "bad --ros-args: Couldn't parse params file: '--params-file missing.yaml'",
+    # names that are not one of the choices
+    ros_args("line_sim", "top_camera:=wide"): "unknown top camera preset 'wide'; known: default, paper",
+    ros_args("line_sim", "sensor:=lidar"): "unknown sensor 'lidar': choose one of ideal, stereo, structured_light",
+    ros_args("line_sim", "line:=muddy"): "unknown line preset 'muddy'",
+    ros_args("segmenter", "image_qos:=fast"): "image_qos must be one of sensor_data, reliable, got 'fast'",
+    ros_args("recorder", "compression:=bogus"): "unknown compression 'bogus' (zstd, lz4 or none)",
+    # values that do not fit together
+    ros_args("line_sim", "lane_pitch_m:=0.2", "lanes:=6"): "need a 1.360 m belt",
+    ros_args("line_sim", "lateral_max_m:=0.045", "lane_pitch_m:=0.08"): "at most half the lane pitch",
+    ros_args("line_sim", "fillets_per_minute:=250.0"): "at most 203 per minute",
+    ros_args("line_sim", "spawn_spacing_m:=0.1"): "spawn_spacing_m",
+    ros_args("line_sim", "speed_change_fpm:=0.5"): "speed_change_fpm must be 0 or within 1..400",
+    ros_args("line_sim", "scale_min:=1.3"): "scale_max must be >= scale_min 1.3",
+    ros_args("grader", "side_lane:=4"): "side_lane 4 is not a lane (0..2)",
+    ros_args("reject_gate", "gate_distance_m:=[0.5, 0.6]"): "gate_distance_m needs 1 or 3 values, got 2",
 }
 RUN_REFUSALS = {  # `woody run` options that become node parameters: refused before any node starts
     ("--lanes", "7"): "--lanes must be 1..6, got 7",

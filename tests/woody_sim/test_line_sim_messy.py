@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import subprocess
-
 import pytest
 from conftest import spin_until
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from woody_tools.processes import NodeProcess, entry_point
+from woody_tools.processes import NodeProcess
 
 pytestmark = pytest.mark.ros
 """Starts node entry points as processes."""
@@ -79,20 +77,3 @@ def test_yaw_sd_alone_turns_each_fillet_by_its_own_draw(ros_node, ros_domain, tm
         turned = place_mesh(straight[truth.mesh], placement)
         assert (truth.length, truth.width) == pytest.approx((turned.length, turned.width), abs=1e-6)
     assert len({t.mesh for t in truths}) == 1 and len({round(t.length, 5) for t in truths}) == 3
-
-
-@pytest.mark.parametrize(("name", "value", "mention"), [
-    ("line", "muddy", "unknown line preset 'muddy'"),
-    ("lane_pitch_m", "0.2", "need a 1.360 m belt"),
-    ("lateral_max_m", "0.045", "at most half the lane pitch"),
-    ("fillets_per_minute", "250.0", "at most 203 per minute"),
-    ("spawn_spacing_m", "0.1", "spawn_spacing_m"),
-    ("speed_change_fpm", "0.5", "speed_change_fpm must be 0 or within 1..400"),
-    ("scale_min", "1.3", "scale_max must be >= scale_min 1.3"),
-])
-def test_line_sim_refuses_a_bad_line_in_one_line(name, value, mention):
-    extra = {"lane_pitch_m": ["-p", "lanes:=6"], "lateral_max_m": ["-p", "lane_pitch_m:=0.08"]}.get(name, [])
-    result = subprocess.run([entry_point("line_sim"), "--ros-args", "-p", f"{name}:={value}", *extra],
-                            capture_output=True, text=True, timeout=60)
-    lines = [line for line in result.stderr.splitlines() if "pybullet build time" not in line]
-    assert result.returncode == 2 and len(lines) == 1 and mention in lines[0], result.stderr
