@@ -173,7 +173,7 @@ def test_spawn_service_spawns_or_explains(ros_node, ros_domain, tmp_path):
 
 
 def test_line_sim_holds_its_first_step_until_the_recorder_listens_to_every_topic(ros_domain, tmp_path):
-    """With ``wait_for_recorder`` the bag starts at sim time 0 on every topic: the first clock, the first frame of
+    """With ``wait_for_recorder`` the bag starts with the first step on every topic: the first clock, the first frame of
     each camera and the latched ground truth (the recorder finds topics every 0.5 s, so without the wait it
     would join after the line had started)."""
     from woody_bag.reader import read_bag
@@ -198,6 +198,6 @@ def test_line_sim_holds_its_first_step_until_the_recorder_listens_to_every_topic
         if stamp is not None:
             first.setdefault(message.topic, stamp_to_seconds(stamp))
         frames += message.topic == "/top_camera/depth/image_raw"
-    assert first["/clock"] == 0.0 and first["/top_camera/depth/image_raw"] == 0.0
-    assert first["/side_camera/image_raw"] == 0.0 and "/line/ground_truth" in first
-    assert frames == 31  # 0 .. 1.0 s at 30 Hz, none before the recorder listened
+    step = first["/clock"]  # the first physics step's time: the line's first frames go out with it
+    assert 0.0 < step < 0.005 and first["/top_camera/depth/image_raw"] == first["/side_camera/image_raw"] == step
+    assert "/line/ground_truth" in first and frames == 31  # dt, then every 1/30 s to 1.0 s: none before the recorder
