@@ -108,9 +108,11 @@ def descriptor_rows(text: str) -> dict[str, list[str]]:
 
 
 def test_meshes_stats_describes_the_repaired_and_converted_meshes_as_their_references(meshes):
+    from woody_sim.meshes import BUILTIN_DIR
+
     mixed = meshes / "mixed"
-    stats, builtin = run_entries([("woody", "meshes", "stats", str(mixed)), ("woody", "meshes", "stats", "builtin")],
-                                 None, timeout=120)
+    commands = [("woody", "meshes", "stats", str(mixed)), ("woody", "meshes", "stats", str(BUILTIN_DIR))]
+    stats, builtin = run_entries(commands, None, timeout=120)
     assert stats.code == 0 and builtin.code == 0 and "Traceback" not in stats.stderr, stats.lines
     assert f"set {mixed}: 3 meshes" in stats.stdout
     for name, reason in BAD.items():
