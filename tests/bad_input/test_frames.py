@@ -32,13 +32,17 @@ FILLETS = 12
 RUN_TIMEOUT_S = 300
 PAUSE_S = 1.0
 PAUSE_EVERY_S = 1.5
+ATTEMPTS = 2
+"""Runs tried for a run that measured every watched fillet: on a machine loaded far beyond its cores a grader can
+fall behind the side camera in any run and publish an NMDM absent (with its reason, never a partial value)."""
 HOG_RUNS = 2
 """Runs beside two CPU hogs in the suite (each ~40 s on a loaded 2-core machine)."""
 WATCHED_LANE = 1
-SPREAD = {"score": 0.02, "line_phi": 0.02, "phi": 0.02, "hu_term": 0.02, "solidity_term": 0.05, "nmdm": 0.05,
-          "mdm": 0.05, "be": 0.25}
-"""Largest relative difference from the warm run that is run-to-run spread (one lost top frame is tolerated and
-moves Φ a little; the side view's minimum falls between frames at another phase)."""
+SPREAD = {"score": 0.02, "line_phi": 0.02, "phi": 0.02, "hu_term": 0.02, "solidity_term": 0.05, "nmdm": 0.01,
+          "mdm": 0.01, "be": 0.25}
+"""Largest relative difference from the warm run taken as run-to-run spread. Whole runs agree to 4 digits; the
+margin is for the one lost frame a measurement tolerates (Φ_t or MDM of that frame missing). A partial passage
+was 1.2 % off (NMDM 0.812 for 0.802) to 190 % (2.27 for 0.79)."""
 VALUES = tuple(SPREAD)
 SAMPLE = REPO / "bags" / "sample" / "line.mcap"
 CAMERA_TOPICS = ["/top_camera/depth/image_raw", "/top_camera/depth/camera_info", "/side_camera/image_raw",
@@ -68,10 +72,25 @@ def recorded_verdicts(bag: Path) -> list:
     return [decode(t, d) for _, t, d, _ in read_bag(bag, topics=["/grading/verdicts"])]
 
 
+def measured_every_watched_fillet(out: Path, env_of_a_run=lambda: None, check=lambda verdicts: None) -> list:
+    """The verdicts of the first of ATTEMPTS runs into ``out``-1, -2, ... (each in the environment
+    ``env_of_a_run()`` gives it, each passing ``check``) whose four watched-lane verdicts all carry an NMDM."""
+    for attempt in range(1, ATTEMPTS + 1):
+        verdicts = run_line(out.with_name(f"{out.name}-{attempt}"), env=env_of_a_run())
+        check(verdicts)
+        assert len(verdicts) == FILLETS and len(watched_nmdms(verdicts)) == 4
+        missing = [v.unscored_reason for v in verdicts if v.lane == WATCHED_LANE and math.isnan(v.nmdm)]
+        assert all(missing), "an absent NMDM says why"
+        if not missing:
+            return verdicts
+        print(f"{out.name} run {attempt}: watched-lane NMDM absent: {missing}")
+    raise AssertionError(f"{ATTEMPTS} runs, none measured every watched fillet: {missing}")
+
+
 @pytest.fixture(scope="module")
 def warm(tmp_path_factory) -> list:
-    """The undisturbed run's verdicts (the numba cache as the test environment has it: warm after the first run)."""
-    return run_line(tmp_path_factory.mktemp("warm") / "run")
+    """An undisturbed run's verdicts (the numba cache as the test environment has it: warm after the first run)."""
+    return measured_every_watched_fillet(tmp_path_factory.mktemp("warm") / "run")
 
 
 def key(verdict) -> tuple[int, int, int]:
@@ -103,9 +122,8 @@ def watched_nmdms(verdicts: list) -> list[float]:
 
 def test_the_warm_run_measures_every_watched_fillet(warm):
     """The reference itself: 12 verdicts, four in the watched lane, each with its side-view metrics."""
-    assert len(warm) == FILLETS
     nmdms = watched_nmdms(warm)
-    assert len(nmdms) == 4 and all(0.2 < n < 1.5 for n in nmdms), nmdms
+    assert all(0.2 < n < 1.5 for n in nmdms), nmdms
 
 
 def grader_of(run: subprocess.Popen) -> int:
@@ -146,11 +164,19 @@ def test_a_grader_paused_every_1_5_s_publishes_no_wrong_side_value(warm, tmp_pat
 
 
 def test_a_run_from_an_empty_numba_cache_gives_the_warm_verdicts(warm, tmp_path):
-    cache = tmp_path / "numba-cache"
-    cache.mkdir()
-    got = run_line(tmp_path / "cold", env=dict(os.environ, NUMBA_CACHE_DIR=str(cache)))
-    assert any(cache.rglob("*.nbi")), "the run compiled into the empty cache"
-    assert assert_nothing_wrong(got, warm, "cold cache") == 0, "the nodes compile before they subscribe"
+    """Each attempt starts from its own empty cache: the nodes compile before they subscribe, so the first
+    passage is measured whole."""
+    caches = []
+
+    def cold_env() -> dict:
+        caches.append(tmp_path / f"numba-cache-{len(caches) + 1}")
+        caches[-1].mkdir()
+        return dict(os.environ, NUMBA_CACHE_DIR=str(caches[-1]))
+
+    got = measured_every_watched_fillet(tmp_path / "cold", cold_env,
+                                        check=lambda verdicts: assert_nothing_wrong(verdicts, warm, "cold cache"))
+    assert all(any(cache.rglob("*.nbi")) for cache in caches), "each run compiled into its empty cache"
+    assert assert_nothing_wrong(got, warm, "cold cache") == 0
     assert watched_nmdms(got) == pytest.approx(watched_nmdms(warm), rel=SPREAD["nmdm"])
 
 
