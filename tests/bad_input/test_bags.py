@@ -22,6 +22,7 @@ from conftest import REPO, spin_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from woody_bag.summary import LOSSES_RECORD, bag_summary, losses_text, recorded_losses
+from woody_tools.line_run import LOST_NOTE
 from woody_tools.processes import NodeProcess, entry_point, wait_for
 
 pytestmark = pytest.mark.ros
@@ -32,7 +33,7 @@ SAMPLE_FILLETS = 3
 
 
 def start_run(tmp_path: Path, *args: str, env: dict[str, str] | None = None) -> subprocess.Popen:
-    """`woody run ... --out tmp_path/run` in a session of its own, its output in run.out / run.err."""
+    """`woody run ... --out tmp_path/run` in a process group of its own, its output in run.out / run.err."""
     env = {k: v for k, v in (env or os.environ).items() if env is not None or k != "ROS_DOMAIN_ID"}
     return subprocess.Popen([entry_point("woody"), "run", *args, "--out", str(tmp_path / "run")],
                             stdout=open(tmp_path / "run.out", "w"), stderr=open(tmp_path / "run.err", "w"),
@@ -106,7 +107,7 @@ def test_a_full_disk_is_one_line_and_keeps_the_graded_rows_and_the_bag(tmp_path)
 
 
 def busy_processes(count: int = 2) -> list[subprocess.Popen]:
-    """CPU hogs, each in a session (and scheduling group) of its own, like programs started from other terminals."""
+    """CPU hogs, each in a scheduling group of its own (setsid), like programs started from other terminals."""
     return [subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
             for _ in range(count)]
 
@@ -124,7 +125,7 @@ def test_the_design_load_beside_two_busy_processes_loses_nothing(tmp_path):
     bag = tmp_path / "run" / "line.mcap"
     summary = bag_summary(bag)
     assert summary["metadata"][LOSSES_RECORD]["total"] == "0", (tmp_path / "run" / "logs" / "recorder.log").read_text()
-    recording = f"{summary['message_count']} messages, no message lost in transport"
+    recording = f"{summary['message_count']} messages, no message lost"
     assert f"bag: {bag} ({recording})" in out, out
     assert f"| recording | {recording} |" in (tmp_path / "run" / "report.md").read_text()
 
@@ -153,8 +154,8 @@ def test_messages_lost_by_a_starved_recorder_are_counted_per_topic_where_the_use
     for topic, lost in losses.items():
         assert f"{topic} " in closing and f"(lost {lost})" in closing.split(f"{topic} ", 1)[1].split(",")[0]
     said = losses_text(losses)
-    assert said.startswith(f"{sum(losses.values())} messages lost in transport (") and "/blast/image_raw" in said
-    assert woody_lines(err) == [f"woody run: recorder: {said}: the bag misses them (the verdicts do not)"], err
+    assert said.startswith(f"{sum(losses.values())} messages lost (") and "/blast/image_raw" in said
+    assert woody_lines(err) == [f"woody run: recorder: {said}: {LOST_NOTE}"], err
     assert f"{said})" in out, out  # bag: <path> (<n> messages, <said>)
     report = (out_dir / "report.md").read_text()
     assert f"- recorder: {said}" in report and f"messages, {said} |" in report
@@ -206,9 +207,8 @@ def test_replaying_twice_and_faster_into_live_nodes_gives_one_verdict_per_fillet
     logs = "\n".join(log for _, log in passes) + "\n".join(n.log_tail() for n in nodes)
     for verdicts, log in passes:  # skipped at the start, or as soon as playback saw them (before any verdict)
         assert "replay: not replaying topics live nodes publish" in log or "not replayed from t=0.000s" in log, log
-        for topic, node in (("/vision/tracks", "segmenter"), ("/grading/verdicts", "grader"),
-                            ("/grading/markers", "grader"), ("/reject_gate/commands", "reject_gate")):
-            assert f"{topic} (by {node})" in log, log
+        for topic in ("/vision/tracks", "/grading/verdicts", "/grading/markers", "/reject_gate/commands"):
+            assert f"{topic} (by " in log, log  # the node's name, or ? when its publisher is known before its name
         assert len(verdicts) == SAMPLE_FILLETS, logs
     first, second = ([(v.lane, v.classification, v.header.stamp.sec, v.header.stamp.nanosec) for v in verdicts]
                      for verdicts, _ in passes[:2])

@@ -17,11 +17,11 @@ def test_losses_travel_through_the_bag_metadata(tmp_path):
                                        "/side_camera/image_raw": "3"}
     assert recorded_losses(metadata) == {"/clock": 13, "/side_camera/image_raw": 3}
     assert losses_text(recorded_losses(metadata)) == (
-        "16 messages lost in transport (/clock 13, /side_camera/image_raw 3)")
+        "16 messages lost (/clock 13, /side_camera/image_raw 3)")
 
 
 def test_no_loss_and_no_record_are_told_apart():
     assert recorded_losses({LOSSES_RECORD: losses_record({"/clock": (10, 10)})}) == {}
-    assert losses_text({}) == "no message lost in transport"
+    assert losses_text({}) == "no message lost"
     assert recorded_losses({"woody": {}}) is None
-    assert losses_text(None) == "losses in transport not recorded"
+    assert losses_text(None) == "losses not recorded"

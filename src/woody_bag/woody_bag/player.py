@@ -42,6 +42,8 @@ from woody_bag.schemas import message_class, message_definition
 from woody_common.stamps import nanoseconds_to_stamp
 
 CLOCK = "/clock"
+UNNAMED = "_NODE_NAME_UNKNOWN_"
+"""The node name of a publisher discovered before its node's name (shown as "?")."""
 LIVE_CHECK_S = 0.1
 """How often playback looks for live publishers of the topics it replays (s of wall time)."""
 
@@ -109,8 +111,8 @@ def live_publishers(node, topics, namespace: str) -> dict[str, list[str]]:
     own = (node.get_name(), node.get_namespace())
     live = {}
     for topic in topics:
-        nodes = sorted({i.node_name for i in node.get_publishers_info_by_topic(moved(topic, namespace))
-                        if (i.node_name, i.node_namespace) != own})
+        nodes = sorted({i.node_name.replace(UNNAMED, "?") for i in node.get_publishers_info_by_topic(
+            moved(topic, namespace)) if (i.node_name, i.node_namespace) != own})
         if nodes:
             live[topic] = nodes
     return live

@@ -19,7 +19,7 @@ Parameters (``--ros-args -p name:=value``):
   level, 1), ``chunk_size`` (bytes, 4 MiB), ``flush_period`` (s, 1.0: the
   longest a message waits in memory before its chunk is written; what a
   SIGKILL can lose), ``max_buffer_mb`` (512: received but unwritten data; a
-  full buffer holds the subscriptions back rather than grow).
+  message arriving while it is full is dropped and counted lost).
 - ``run_settings`` (string): a JSON object of the recorded run's settings, kept in
   the bag's ``woody`` metadata record (`woody report BAG` rebuilds its table from it).
 
@@ -48,7 +48,10 @@ writer thread builds, compresses (zstd releases the GIL) and writes chunks, so
 compression and disk I/O use the second core. SIGINT/SIGTERM finish the file
 (summary and indexes) and log one line: messages, MB on disk (compressed), and per
 topic written/published (``/?`` when several publishers share it), naming what was
-lost in transport (a gap in the publisher's sequence numbers); the losses per topic
+lost (a gap in the publisher's sequence numbers: lost in transport, or dropped
+because more than ``max_buffer_mb`` was unwritten; the callbacks never wait for
+the writer, so the middleware never holds more than ``queue_depth`` per topic
+for the recorder); the losses per topic
 are also the bag's ``woody.losses`` metadata record (`woody_bag.summary.LOSSES_RECORD`),
 which ``woody bag info``, ``woody run`` and its report.md show; exit code 0. A bad
 parameter or an unwritable output: one error line, exit code 2.
@@ -138,6 +141,7 @@ class Recorder(Node):
         self._subscriptions_by_topic: dict[str, object] = {}
         self._offered: dict[str, int] = {}
         self._seen: dict[str, list] = {}  # topic -> [first publication seq, last, received, most publishers]
+        self._dropped: dict[str, int] = {}  # topic -> messages dropped because the writer fell behind
         self._ignored: set[str] = set()
         self._start = time.monotonic()
         self._thread = threading.Thread(target=self._write_loop, name="mcap-writer", daemon=True)
@@ -276,9 +280,13 @@ class Recorder(Node):
 
     # ------------------------------------------------------------------ writing
     def _enqueue(self, item: tuple, size: int) -> None:
+        """Hand an item to the writer thread without waiting: a message arriving while more than ``max_buffer_mb``
+        is unwritten is dropped (and counted), so a writer that falls behind never makes the middleware hold
+        ``queue_depth`` images per topic for us."""
         with self._cond:
-            while self._buffered > self._max_buffer and not self._stopping and self._error is None:
-                self._cond.wait(0.1)
+            if size and self._buffered > self._max_buffer:
+                self._dropped[item[0]] = self._dropped.get(item[0], 0) + 1
+                return
             self._buffered += size
             self._items.append(item)
             self._cond.notify()
@@ -343,7 +351,8 @@ class Recorder(Node):
 
     def drops(self) -> dict[str, tuple[int, int | None]]:
         """Per topic (written, published while subscribed): the publisher's sequence numbers count what it
-        sent, so a gap is a message lost in transport. ``None`` when several publishers share the topic
+        sent: published but not written is lost (in transport, or dropped by a full buffer). ``None`` when several
+        publishers share the topic
         (their sequence numbers interleave) or the middleware gives none."""
         result = {}
         for topic, (first, last, _received, publishers) in sorted(self._seen.items()):
@@ -379,10 +388,17 @@ class Recorder(Node):
         lost = sum(max(0, p - w) for w, p in drops.values() if p is not None)
         self.get_logger().info(
             f"wrote {self.output}: {total} messages, {size / 1e6:.1f} MB on disk in {duration:.1f} s, "
-            f"{lost} lost in transport; written/published per topic: "
+            f"{lost} lost{self._dropped_text()}; written/published per topic: "
             + (", ".join(f"{t} {_drop_text(*d)}" for t, d in drops.items()) or "nothing")
             + (f"; never seen: {', '.join(missing)}" if missing else ""))
         return 0
+
+    def _dropped_text(self) -> str:
+        dropped = sum(self._dropped.values())
+        if not dropped:
+            return ""
+        return (f" ({dropped} of them received while more than max_buffer_mb was unwritten: "
+                + ", ".join(f"{t} {n}" for t, n in sorted(self._dropped.items())) + ")")
 
     def _failure_line(self) -> str:
         """The one line naming why the bag could not be written, where, and how to read what it holds."""

@@ -101,7 +101,7 @@ def bag_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
 
 
 LOSSES_RECORD = "woody.losses"
-"""The recorder's metadata record of messages lost in transport: ``total``, ``unmeasured`` (topics whose
+"""The recorder's metadata record of the messages published but not recorded: ``total``, ``unmeasured`` (topics whose
 publishers gave no usable sequence numbers) and the count of every topic that lost some."""
 
 
@@ -115,7 +115,7 @@ def losses_record(drops: dict[str, tuple[int, int | None]]) -> dict[str, str]:
 
 
 def recorded_losses(metadata: dict[str, dict[str, str]]) -> dict[str, int] | None:
-    """{topic: messages lost in transport} of a bag's metadata (empty: none lost); None when the recorder did not
+    """{topic: messages lost} of a bag's metadata (empty: none lost); None when the recorder did not
     finish the bag (no `LOSSES_RECORD`)."""
     record = metadata.get(LOSSES_RECORD)
     if record is None:
@@ -124,17 +124,17 @@ def recorded_losses(metadata: dict[str, dict[str, str]]) -> dict[str, int] | Non
 
 
 def recording_text(summary: dict[str, Any]) -> str:
-    """A `bag_summary` in one phrase for the terminal and report.md: "5133 messages, no message lost in transport"."""
+    """A `bag_summary` in one phrase for the terminal and report.md: "5133 messages, no message lost"."""
     return f"{summary['message_count']} messages, {losses_text(recorded_losses(summary['metadata']))}"
 
 
 def losses_text(losses: dict[str, int] | None) -> str:
-    """``"no message lost in transport"``, ``"19 messages lost in transport (/clock 13, ...)"`` or, for a bag
+    """``"no message lost"``, ``"19 messages lost (/clock 13, ...)"`` or, for a bag
     without `LOSSES_RECORD` (its recorder did not finish it, or another recorder wrote it), that they are not
     recorded."""
     if losses is None:
-        return "losses in transport not recorded"
+        return "losses not recorded"
     if not losses:
-        return "no message lost in transport"
-    return (f"{sum(losses.values())} messages lost in transport ("
+        return "no message lost"
+    return (f"{sum(losses.values())} messages lost ("
             + ", ".join(f"{t} {n}" for t, n in sorted(losses.items(), key=lambda item: -item[1])) + ")")

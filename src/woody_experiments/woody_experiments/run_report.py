@@ -34,7 +34,7 @@ UNSCORED_DIVERTED = "unscored fillets diverted"
 """Run setting (report.md's table, the bag's ``woody.run`` record): reject_gate's ``divert_unscored``."""
 
 RECORDING = "recording"
-"""Run setting: the messages in the run's bag and those its recorder lost in transport, per topic
+"""Run setting: the messages in the run's bag and those its recorder lost, per topic
 (`woody_bag.summary.recording_text`)."""
 
 CALIBRATED_SPEEDS = "calibrated line speeds (FPM)"

@@ -61,6 +61,8 @@ HANGUP_LOG = "woody_run.log"
 """In the run's logs/: what woody run prints once its terminal has closed (SIGHUP)."""
 INTERRUPTED = "interrupted"
 """Why the watch ended early: a stop signal (STOP)."""
+LOST_NOTE = "the bag misses them (verdicts.csv does not: it is written from the live line)"
+"""Follows the messages the recorder lost in woody run's line and report.md's note."""
 OUTPUTS_UNWRITTEN = "cannot write to"
 """Begins woody run's line when --out takes no more (a full disk); the exit code is then 1."""
 
@@ -502,7 +504,7 @@ def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, mon
                  "gate commands": len(monitor.gate_commands), "sim time (s)": f"{monitor.sim_time:.1f}"})
     recording, lost = recording_summary(out / "line.mcap")
     info[RECORDING] = recording
-    problems = [f"recorder: {lost}: the bag misses them (the verdicts do not)"] if lost else []
+    problems = [f"recorder: {lost}: {LOST_NOTE}"] if lost else []
     pictures, notes = [], list(mesh_notes) + problems
     print(verdict_table(rows, divert_unscored=unscored_diverted(info)))
     print(f"\n{diversion_summary(rows, unscored_diverted(info))}")
@@ -527,8 +529,8 @@ def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, mon
 
 
 def recording_summary(bag: Path) -> tuple[str, str | None]:
-    """What the bag holds, for the terminal and report.md ("5133 messages, no message lost in transport"), and what
-    the recorder lost in transport per topic (None when nothing was lost or the bag does not say)."""
+    """What the bag holds, for the terminal and report.md ("5133 messages, no message lost"), and what the recorder
+    lost per topic (None when nothing was lost or the bag does not say)."""
     try:
         summary = bag_summary(bag)
     except BagError as exc:
