@@ -88,7 +88,11 @@ RUN_REFUSALS = {  # `woody run` options that become node parameters: refused bef
     ("--speed-fpm", "nan"): "--speed-fpm must be in [1, 400], got nan",
     ("--k", "-1"): "--k values must be finite and >= 0, got -1",
     ("--k", "0", "inf"): "--k values must be finite and >= 0, got 0 inf",
-    ("--fillets", "0"): "--fillets must be >= 1, got 0",
+    ("--fillets", "0"): "--fillets must be 1..100000, got 0",
+    ("--fillets", "200000"): "--fillets must be 1..100000, got 200000",
+    ("--seed", "-1"): "--seed must be 0..2147483647, got -1",
+    ("--seed", "3000000000"): "--seed must be 0..2147483647, got 3000000000",
+    ("--score", "paper", "--threshold", "0.0005"): "--threshold must be in [0.001, 1000], got 0.0005",
     ("--side-rate", "-1"): "--side-rate must be in [0, 400] Hz (0: no side camera), got -1",
 }
 

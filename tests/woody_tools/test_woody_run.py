@@ -229,7 +229,7 @@ def test_a_run_on_an_exported_domain_with_other_nodes_refuses(tmp_path):
     (["--speed-change", "100"], "--speed-change: expected FPM@SECONDS"),
     (["--speed-change", "500@3"], "--speed-change: expected FPM@SECONDS with FPM in [1, 400]"),
     (["--score", "both"], "--score must be one of line|paper, got 'both'"),
-    (["--threshold", "0"], "--threshold must be in (0, 1000], got 0"),
+    (["--threshold", "0"], "--threshold must be in [0.001, 1000], got 0"),
 ])
 def test_bad_line_options_are_refused_before_any_node_starts(tmp_path, args, message):
     result = woody_run("--fillets", "1", "--out", str(tmp_path / "run"), *args, timeout=60)

@@ -25,6 +25,10 @@ MAX_SIDE_RATE_HZ = 400.0
 """Fastest side camera line_sim and woody run accept (0 turns it off)."""
 MAX_SPAWN_DURATION_S = 1e6
 """Longest spawning time (sim seconds) line_sim and woody run accept."""
+MAX_FILLETS = 100_000
+"""Most fillets one line_sim or woody run spawns."""
+MAX_SEED = 2**31 - 1
+"""Largest seed line_sim and woody run accept (seeds are 0..MAX_SEED)."""
 
 LANES = 3
 LANE_PITCH_M = 0.16

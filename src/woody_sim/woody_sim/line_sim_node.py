@@ -37,7 +37,9 @@ from woody_common.line import (
     LANE_PITCH_M,
     LANES,
     MAX_BELT_WIDTH_M,
+    MAX_FILLETS,
     MAX_LANES,
+    MAX_SEED,
     MAX_SIDE_RATE_HZ,
     MAX_SPAWN_DURATION_S,
     MAX_SPAWN_SPACING_M,
@@ -114,8 +116,8 @@ class LineSim(Node):
         mesh_spec = declare(self, "meshes", "builtin",
                             "Mesh set: builtin, generated:N[:SEED], a folder; comma-combinable.")
         self.seed = seed = declare(self, "seed", 7, "Seed of the stiffness draw, the fillets' placements "
-                                   "(line conditions) and generated meshes.", 0, 2**31 - 1)
-        self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, 100000)
+                                   "(line conditions) and generated meshes.", 0, MAX_SEED)
+        self.max_fillets = declare(self, "fillets", 0, "Fillets to spawn in total (0 = no limit).", 0, MAX_FILLETS)
         self.spawn_duration = declare(self, "spawn_duration_s", 0.0, "Stop spawning after this much sim time "
                                       "(0 = no limit).", 0.0, MAX_SPAWN_DURATION_S)
         calibrated = calibrated_defaults(self, "line_sim")  # read once, before declaring; none if given

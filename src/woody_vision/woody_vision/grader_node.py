@@ -56,7 +56,7 @@ from woody_vision.grader_core import (
     TrackObservation,
     check_score,
 )
-from woody_vision.grading import Cut, FilletConditions, GradingRules
+from woody_vision.grading import THRESHOLD_RANGE, Cut, FilletConditions, GradingRules
 from woody_vision.image_encodings import color_rgb
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.overlays import FRAME, REFERENCE, Overlay, outline, verdict_overlays
@@ -155,7 +155,7 @@ class Grader(Node):
                                          "messy line) or paper (the paper's Φ against the single threshold; no "
                                          "grade)."))
         paper = declare(self, "threshold", defaults["threshold"], "With score paper: Φ below this is woody "
-                        "(stiff fillets deform less); the default is the calibrated one.", 0.001, 1000.0)
+                        "(stiff fillets deform less); the default is the calibrated one.", *THRESHOLD_RANGE)
         cuts = [Cut.of(declare(self, name, defaults[name], text)) for name, text in (
             ("line_threshold", "With score line: the reject cut on line_phi, [base at 100 FPM, narrow end first, "
              "straight, 0.19 m long; d ln(cut)/d speed per m/s; ln offset blunt end first; d ln(cut)/d turn per "

@@ -40,6 +40,9 @@ GRADE_NORMAL = "normal"
 GRADE_MODERATE = "moderate"
 GRADE_SEVERE = "severe"
 
+THRESHOLD_RANGE = (0.001, 1000.0)
+"""The paper score's threshold and a constant line cut are within this range, wherever they are given."""
+
 
 REFERENCE_LENGTH_M = 0.19
 """Body length at which a cut takes its base (a typical fillet)."""

@@ -17,7 +17,9 @@ from woody_common.calibration import ENV_VAR, resolve_calibration, resolved_cali
 from woody_common.line import (
     CLASS_K,
     LANE_PITCH_M,
+    MAX_FILLETS,
     MAX_LANES,
+    MAX_SEED,
     MAX_SIDE_RATE_HZ,
     MAX_SPAWN_DURATION_S,
     MAX_SPAWN_SPACING_M,
@@ -36,8 +38,8 @@ from woody_tools import arguments, line_run
 from woody_tools.line_run import RunInterrupted, RunRefused, describe_conditions
 from woody_tools.processes import STOP
 from woody_vision.grader_core import SCORES
+from woody_vision.grading import THRESHOLD_RANGE
 
-MAX_THRESHOLD = 1000.0
 """Largest constant reject cut accepted (the grader's own limit on ``threshold``)."""
 PLACEMENT_OPTIONS = (  # (option, LineConditions field, lowest, highest, unit)
     ("--yaw-sd", "yaw_sd_deg", 0.0, MAX_YAW_SD_DEG, "deg"),
@@ -142,8 +144,10 @@ def _validate(args: argparse.Namespace) -> None:
         raise RunRefused(f"--lanes must be 1..{MAX_LANES}, got {args.lanes}")
     if not low <= args.speed_fpm <= high:
         raise RunRefused(f"--speed-fpm must be in [{low:g}, {high:g}], got {args.speed_fpm}")
-    if args.fillets is not None and args.fillets < 1:
-        raise RunRefused(f"--fillets must be >= 1, got {args.fillets}")
+    if args.fillets is not None and not 1 <= args.fillets <= MAX_FILLETS:
+        raise RunRefused(f"--fillets must be 1..{MAX_FILLETS}, got {args.fillets}")
+    if not 0 <= args.seed <= MAX_SEED:
+        raise RunRefused(f"--seed must be 0..{MAX_SEED}, got {args.seed}")
     if args.duration is not None and not 0.0 < args.duration <= MAX_SPAWN_DURATION_S:
         raise RunRefused(f"--duration must be in (0, {MAX_SPAWN_DURATION_S:g}] sim seconds, got {args.duration:g}")
     if not 0.0 <= args.side_rate <= MAX_SIDE_RATE_HZ:
@@ -247,8 +251,9 @@ def _speed_change(text: str | None) -> tuple[float, float]:
 def _validate_grading(args: argparse.Namespace) -> None:
     if args.score is not None and args.score not in SCORES:
         raise RunRefused(f"--score must be one of {'|'.join(SCORES)}, got '{args.score}'")
-    if args.threshold is not None and not 0.0 < args.threshold <= MAX_THRESHOLD:
-        raise RunRefused(f"--threshold must be in (0, {MAX_THRESHOLD:g}], got {args.threshold:g}")
+    low, high = THRESHOLD_RANGE
+    if args.threshold is not None and not low <= args.threshold <= high:
+        raise RunRefused(f"--threshold must be in [{low:g}, {high:g}], got {args.threshold:g}")
 
 
 def checked(args: argparse.Namespace) -> argparse.Namespace:
