@@ -482,9 +482,11 @@ class LineSim(Node):
         self.get_logger().info("waiting for subscribers: " + ", ".join(
             [f"{n} on {p.topic_name}" for p, n in wanted] + ([f"{self.wait_recorder} on every topic of this node"]
                                                              if self.wait_recorder else [])))
+        waited = time.monotonic()
         while not self._stop.is_set() and (any(p.get_subscription_count() < n for p, n in wanted)
                                            or not self._recorder_listens()):
             executor.spin_once(timeout_sec=0.02)
+        self.get_logger().info(f"subscribers there after {time.monotonic() - waited:.2f} s")
         if self.wait_recorder:
             return
         # Give late joiners (a recorder discovering topics) a moment to subscribe to the rest.

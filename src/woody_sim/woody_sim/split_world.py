@@ -51,7 +51,9 @@ class _Worker:
                  timeout: float) -> None:
         self.process = ChildProcess(_serve, (geometry, config), f"physics worker {index}", start_method, timeout)
         self.models: dict[int, FilletModel] = {}
-        """Live fillets of this worker and their chain models (the worker builds its own copy)."""
+        """Live fillets of this worker and their chain models."""
+        self.meshes: set[int] = set()
+        """Keys of the meshes (and chain models) sent to this worker."""
         self.poses: dict[int, np.ndarray] = {}
         self.asked = self.reached = 0  # the step the worker was last sent to, and the step it answered from
 
@@ -111,17 +113,20 @@ class SplitLineWorld:
         return self._local.blown_up + self._blown
 
     def model_for(self, mesh: FilletMesh) -> FilletModel:
-        """The chain geometry for a mesh, built here once and sent to the workers with the mesh."""
-        self._mesh_key(mesh)
+        """The chain geometry for a mesh, built here once; a worker gets it with the mesh at its first spawn of it
+        (so this process never waits for a worker still starting)."""
+        if mesh not in self._mesh_keys:
+            self._mesh_keys[mesh] = self._next_key  # never a released mesh's key: the workers forgot it
+            self._next_key += 1
         return self._local.model_for(mesh)
 
-    def _mesh_key(self, mesh: FilletMesh) -> int:
-        """A mesh is sent to the workers once, with its chain model, and named by its key afterwards."""
-        key = self._mesh_keys.get(mesh)
-        if key is None:
-            key = self._mesh_keys[mesh] = self._next_key  # never a released mesh's key: the workers forgot it
-            self._next_key += 1
-            self._broadcast(("mesh", key, mesh, self._local.model_for(mesh)))
+    def _send_mesh(self, worker: _Worker, mesh: FilletMesh) -> int:
+        """The mesh's key, the mesh and its chain model sent to ``worker`` first if it has not had them."""
+        self.model_for(mesh)
+        key = self._mesh_keys[mesh]
+        if key not in worker.meshes:
+            worker.process.send(("mesh", key, mesh, self._local.model_for(mesh)))
+            worker.meshes.add(key)
         return key
 
     def _broadcast(self, msg: tuple) -> None:
@@ -132,8 +137,10 @@ class SplitLineWorld:
         """As :meth:`LineWorld.release <woody_sim.line_world.LineWorld.release>`, in every world."""
         self._local.release(mesh)
         key = self._mesh_keys.pop(mesh, None)
-        if key is not None:
-            self._broadcast(("release", key))
+        for worker in self._workers:
+            if key in worker.meshes:
+                worker.meshes.discard(key)
+                worker.process.send(("release", key))
 
     def change_speed(self, speed_mps: float, at_time: float | None = None) -> None:
         """As :meth:`LineWorld.change_speed <woody_sim.line_world.LineWorld.change_speed>`; ``at_time`` may
@@ -158,7 +165,7 @@ class SplitLineWorld:
         if worker is None:
             self._local.spawn(mesh, k, lane, mass, speed, fillet_id, lateral_offset=lateral_offset)
         else:
-            key = self._mesh_key(mesh)
+            key = self._send_mesh(worker, mesh)
             worker.send_to(self.steps)  # the worker must have reached the spawn's step when it reads it
             worker.process.send(("spawn", self.steps, key, k, lane, mass, speed, fillet_id, lateral_offset))
             worker.models[fillet_id] = self._local.model_for(mesh).with_mass(mass)
