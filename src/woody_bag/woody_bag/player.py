@@ -21,7 +21,8 @@ The options and exit codes are `woody_tools.commands.replay`'s. Behaviour:
 - Into a running graph: topics that live nodes already publish (found in the
   first ``--discovery`` seconds) are skipped with one warning line, so the
   graph's outputs are not doubled (``--keep-live`` plays them anyway). The
-  player keeps looking every ``LIVE_CHECK_S`` during playback: when a live node
+  player keeps looking every ``LIVE_CHECK_S`` while it waits for subscribers
+  and during playback (endpoint discovery can take seconds): when a live node
   starts publishing a topic it replays (a grader started after the replay),
   it stops replaying that topic, /clock included, with one line.
   ``--exclude`` drops topics by name; ``--namespace NS`` plays under NS.
@@ -141,19 +142,32 @@ def skip_live(node, args, types: dict[str, type], clock_mode: str | None, stop: 
 
 
 def _discover(node, limit: float, stop: Stop, settle: float = 0.5) -> None:
-    """Wait until other nodes have been seen and the graph (nodes and topics) has not changed for ``settle`` s (or
-    ``limit``): a node is known before its publishers are."""
+    """Wait until other nodes have been seen, each with its publishers, and none of that has changed for ``settle``
+    s (or ``limit``): a node is known before its publishers are, and its publishers one by one."""
     deadline = time.monotonic() + limit
-    seen: tuple = ()
+    seen: frozenset = frozenset()
     changed = time.monotonic()
     while not stop and time.monotonic() < deadline:
-        names = {n for n in node.get_node_names_and_namespaces() if n[0] != node.get_name()}
-        graph = (frozenset(names), frozenset(t for t, _ in node.get_topic_names_and_types()))
+        graph = frozenset(_publishers_by_node(node))
         if graph != seen:
             seen, changed = graph, time.monotonic()
-        elif names and time.monotonic() - changed >= settle:
+        elif graph and all(topics for _, topics in graph) and time.monotonic() - changed >= settle:
             return
         stop.event.wait(0.1)
+
+
+def _publishers_by_node(node):
+    """((node, namespace), frozenset of its published topics) of every other node in the graph."""
+    from rclpy._rclpy_pybind11 import NodeNameNonExistentError
+
+    for name, namespace in node.get_node_names_and_namespaces():
+        if (name, namespace) == (node.get_name(), node.get_namespace()):
+            continue
+        try:
+            topics = node.get_publisher_names_and_types_by_node(name, namespace)
+        except NodeNameNonExistentError:  # it left between the two calls
+            topics = []
+        yield (name, namespace), frozenset(t for t, _ in topics)
 
 
 def moved(topic: str, namespace: str) -> str:
@@ -198,6 +212,7 @@ class Player:
             return
         deadline = time.monotonic() + limit
         while not self.stop and time.monotonic() < deadline:
+            self._check_live(0.0)  # discovery goes on while we wait
             if all(p.get_subscription_count() > 0 for p in self.publishers.values()):
                 self._sleep(0.2)  # let the subscribers' side of the match settle too
                 return
