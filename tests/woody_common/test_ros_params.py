@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import subprocess
 
 import pytest
@@ -140,3 +141,21 @@ def test_a_nan_or_infinite_decimal_is_refused_even_without_a_range(make_node):
     with pytest.raises(ValueError, match="parameter period: must be a finite number, got inf"):
         declare(make_node(period=math.inf), "period", 1.0, "period")
     assert declare(make_node(gaps=[0.5, 0.7]), "gaps", [0.6], "gaps") == [0.5, 0.7]
+
+
+def test_a_second_stop_signal_during_the_first_never_waits_on_the_stop_event():
+    """A parent's death signal and a process-group stop can arrive together; the second handler call runs inside
+    the first one's Event.set, whose lock it must not wait for (that deadlocked line_sim for good)."""
+    import threading
+
+    from woody_common.ros_params import _stop_once
+
+    stop = threading.Event()
+    handler = _stop_once(stop)
+    handler(signal.SIGTERM, None)
+    assert stop.is_set()
+    with stop._cond:  # as if the first call were still inside Event.set, holding its lock
+        second = threading.Thread(target=handler, args=(signal.SIGINT, None), daemon=True)
+        second.start()
+        second.join(timeout=2.0)
+        assert not second.is_alive()

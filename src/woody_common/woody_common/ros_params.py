@@ -138,7 +138,7 @@ def run_node(name: str, factory: Callable[[], object], args: list[str] | None = 
 
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, _stop_once(stop))
     code = init_checked(name, args, signal_handler_options=SignalHandlerOptions.NO)
     if code is not None:
         return code
@@ -163,6 +163,19 @@ def run_node(name: str, factory: Callable[[], object], args: list[str] | None = 
     finally:
         closed = _close(node)
     return closed or code
+
+
+def _stop_once(stop: threading.Event):
+    """A signal handler that sets ``stop`` once. ``Event.set`` takes a lock, and a second signal arriving while the
+    first handler holds it (a parent's death signal and a process-group stop at once) would wait for it forever
+    in the same thread: later signals only find the stop under way."""
+    first = threading.Lock()
+
+    def handler(*_) -> None:
+        if first.acquire(blocking=False):
+            stop.set()
+
+    return handler
 
 
 def _spin_until(node, stop: threading.Event) -> int:
