@@ -148,10 +148,10 @@ def test_a_second_stop_signal_during_the_first_never_waits_on_the_stop_event():
     the first one's Event.set, whose lock it must not wait for (that deadlocked line_sim for good)."""
     import threading
 
-    from woody_common.ros_params import _stop_once
+    from woody_common.ros_params import stop_handler
 
     stop = threading.Event()
-    handler = _stop_once(stop)
+    handler = stop_handler(stop)
     handler(signal.SIGTERM, None)
     assert stop.is_set()
     with stop._cond:  # as if the first call were still inside Event.set, holding its lock

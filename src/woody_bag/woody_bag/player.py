@@ -34,12 +34,12 @@ import argparse
 import sys
 import threading
 import time
-from typing import Any
 
 from woody_bag.errors import BagError
 from woody_bag.qos import parse_qos_profiles
 from woody_bag.reader import read_bag
 from woody_bag.schemas import message_class, message_definition
+from woody_common.ros_params import stop_handler
 from woody_common.stamps import nanoseconds_to_stamp
 
 CLOCK = "/clock"
@@ -54,9 +54,8 @@ class Stop:
 
     def __init__(self) -> None:
         self.event = threading.Event()
-
-    def request(self, *_: Any) -> None:
-        self.event.set()
+        self.request = stop_handler(self.event)
+        """Sets the event once (a signal handler: a second signal never waits on the event's lock)."""
 
     def __bool__(self) -> bool:
         return self.event.is_set()

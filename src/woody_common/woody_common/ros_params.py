@@ -138,7 +138,7 @@ def run_node(name: str, factory: Callable[[], object], args: list[str] | None = 
 
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, _stop_once(stop))
+        signal.signal(sig, stop_handler(stop))
     code = init_checked(name, args, signal_handler_options=SignalHandlerOptions.NO)
     if code is not None:
         return code
@@ -165,7 +165,7 @@ def run_node(name: str, factory: Callable[[], object], args: list[str] | None = 
     return closed or code
 
 
-def _stop_once(stop: threading.Event):
+def stop_handler(stop: threading.Event) -> Callable[..., None]:
     """A signal handler that sets ``stop`` once. ``Event.set`` takes a lock, and a second signal arriving while the
     first handler holds it (a parent's death signal and a process-group stop at once) would wait for it forever
     in the same thread: later signals only find the stop under way."""
