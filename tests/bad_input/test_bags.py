@@ -130,6 +130,24 @@ def test_the_design_load_beside_two_busy_processes_loses_nothing(tmp_path):
     assert f"| recording | {recording} |" in (tmp_path / "run" / "report.md").read_text()
 
 
+def test_a_line_faster_than_its_recorder_waits_for_it_and_loses_nothing(tmp_path):
+    """woody run's line runs as fast as its consumers take it: a recorder stopped for 1.5 s (a disk that stalls)
+    holds the line (line_sim waits on recorder/recorded_clock) instead of losing what it publishes meanwhile."""
+    run = start_run(tmp_path, "--fillets", "9")
+    recorder = recorder_pid(tmp_path / "run")
+    log = tmp_path / "run" / "logs" / "recorder.log"
+    assert wait_for(lambda: log.exists() and "recording /top_camera/depth/image_raw" in log.read_text(), 60.0)
+    time.sleep(1.0)
+    os.kill(recorder, signal.SIGSTOP)
+    time.sleep(1.5)
+    os.kill(recorder, signal.SIGCONT)
+    code, out, err = finish(run, tmp_path, timeout=300)
+    assert code == 0, out + err
+    bag = tmp_path / "run" / "line.mcap"
+    assert recorded_losses(bag_summary(bag)["metadata"]) == {} and "no message lost" in out, out
+    assert sum(1 for row in csv.DictReader(open(tmp_path / "run" / "verdicts.csv")) if row["verdict"]) == 9
+
+
 def test_messages_lost_by_a_starved_recorder_are_counted_per_topic_where_the_user_looks(
         ros_domain, spawn_helper, tmp_path):
     """Beyond the design load: the recorder gets no CPU for 2 s (SIGSTOP) while a publisher sends 500 images/s

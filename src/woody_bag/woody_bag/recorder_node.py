@@ -56,6 +56,11 @@ are also the bag's ``woody.losses`` metadata record (`woody_bag.summary.LOSSES_R
 which ``woody bag info``, ``woody run`` and its report.md show; exit code 0. A bad
 parameter or an unwritable output: one error line, exit code 2.
 
+Back-pressure: every 10 ms the newest ``/clock`` stamp written goes out on
+``recorder/recorded_clock``; a line_sim told to wait for this recorder holds
+its line while that lags (``max_lead_s``), so a line faster than the disk slows
+down instead of losing messages.
+
 A full disk or a file size limit (ENOSPC, EFBIG, handled alike; SIGXFSZ is
 ignored) stops the recording: the file is cut back to its last whole record, one
 error line (starting ``stopped recording:``) names the cause, the path and the
@@ -68,17 +73,20 @@ import collections
 import errno
 import re
 import signal
+import struct
 import sys
 import threading
 import time
 
 import rclpy
+from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as RosClock
 
 from woody_bag.errors import BagError
 from woody_bag.qos import qos_profiles_yaml
@@ -86,10 +94,16 @@ from woody_bag.schemas import message_class, message_definition
 from woody_bag.summary import LOSSES_RECORD, losses_record
 from woody_bag.writer import BagWriter
 from woody_common.ros_params import check_overrides, run_node, usage
+from woody_common.topics import RECORDED_CLOCK
 
 DEFAULT_EXCLUDE = r"^/(rosout|parameter_events)$|/_"
 FAILURE_PREFIX = "stopped recording:"
 """Begins the recorder's one error line when the bag cannot be written (full disk, file size limit)."""
+
+
+CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
+ANNOUNCE_PERIOD_S = 0.01
+"""How often (wall s) the newest written /clock stamp goes out on ``recorder/recorded_clock``, when it moved."""
 
 
 class ConfigError(ValueError):
@@ -143,12 +157,17 @@ class Recorder(Node):
         self._seen: dict[str, list] = {}  # topic -> [first publication seq, last, received, most publishers]
         self._dropped: dict[str, int] = {}  # topic -> messages dropped because the writer fell behind
         self._ignored: set[str] = set()
+        self._clock_topics: set[str] = set()
+        self._written_clock = self._announced_clock = None  # newest /clock written, and the one last published
+        self._recorded_pub = self.create_publisher(RosClock, RECORDED_CLOCK, 10)
         self._start = time.monotonic()
         self._thread = threading.Thread(target=self._write_loop, name="mcap-writer", daemon=True)
         self._thread.start()
         self._discover()
         # Steady clock: with use_sim_time the graph's /clock may only start once we subscribe.
-        self.create_timer(discovery_period, self._discover, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(discovery_period, self._discover, clock=steady)
+        self.create_timer(ANNOUNCE_PERIOD_S, self._announce_written_clock, clock=steady)
         self.get_logger().info(
             f"recording to {self.output} ({'topics ' + ', '.join(sorted(self._topics)) if self._topics else ''}"
             f"{' regex ' + self._regex.pattern if self._regex else ''}"
@@ -188,6 +207,8 @@ class Recorder(Node):
 
     # ------------------------------------------------------------------ discovery
     def _wanted(self, topic: str) -> bool:
+        if topic == self._recorded_pub.topic_name:
+            return False  # this node's own progress, not the line's
         if topic in self._topics:
             return True
         if self._regex is not None:
@@ -233,6 +254,8 @@ class Recorder(Node):
         self._enqueue((topic, None, type_name, qos_profiles_yaml(p.qos_profile for p in publishers), 0), 0)
         enqueue, time_ns = self._enqueue, time.time_ns
         seen = self._seen[topic] = [None, 0, 0, len(publishers)]
+        if type_name == CLOCK_TYPE:
+            self._clock_topics.add(topic)
 
         def keep(data: bytes, info: dict) -> None:
             sequence = info.get("publication_sequence_number")
@@ -308,6 +331,8 @@ class Recorder(Node):
                     else:
                         writer.write(topic, data, a, b, sequence & 0xFFFFFFFF)
                         size += len(data)
+                        if topic in self._clock_topics:
+                            self._written_clock = clock_stamp(data)
                 if size:
                     with self._cond:
                         self._buffered -= size
@@ -321,6 +346,13 @@ class Recorder(Node):
             self._error = exc
             with self._cond:
                 self._cond.notify_all()
+
+    def _announce_written_clock(self) -> None:
+        """Publish the newest /clock stamp written (when it moved): a line that waits for it never outruns us."""
+        written = self._written_clock
+        if written is not None and written != self._announced_clock:
+            self._announced_clock = written
+            self._recorded_pub.publish(RosClock(clock=Time(sec=written[0], nanosec=written[1])))
 
     def spin(self, stop: threading.Event) -> int:
         """Record until ``stop`` is set, then take what the middleware still holds; 1 if writing failed (the bag
@@ -410,6 +442,11 @@ class Recorder(Node):
         return (f"{FAILURE_PREFIX} {self.output}: {cause}; stopped after {received} messages received, "
                 f"{size:.1f} MB on disk; the bag is readable up to its last complete chunk: "
                 f"`woody bag recover {self.output} OUT.mcap` writes it complete (OUT on a disk with space)")
+
+
+def clock_stamp(data: bytes) -> tuple[int, int]:
+    """(sec, nanosec) of a serialized rosgraph_msgs/Clock: CDR's 4-byte encapsulation header, then the Time."""
+    return struct.unpack_from("<iI" if data[1] == 1 else ">iI", data, 4)
 
 
 def recorder_failure(log_path) -> str | None:

@@ -11,6 +11,8 @@ SIDE_IMAGE = "side_camera/image_raw"
 TRACKS = "vision/tracks"
 VERDICTS = "grading/verdicts"
 GATE_COMMANDS = "reject_gate/commands"
+RECORDED_CLOCK = "recorder/recorded_clock"
+"""The newest /clock stamp the recorder has written: line_sim holds while it lags (back-pressure on the line)."""
 
 TRACKS_QUEUE_DEPTH = 900
 """History of the reliable /vision/tracks link at both ends: 30 s of a 30 Hz camera. Track messages are

@@ -148,9 +148,10 @@ class LineSim(Node):
         self.realtime = declare(self, "realtime", False, "Pace the simulation to the wall clock.")
         self.duration = declare(self, "duration_s", 0.0, "Exit after this much sim time (0 = run until stopped).",
                                 0.0, 1e6)
-        max_lead = declare(self, "max_lead_s", 0.0, "Hold the simulation while the newest /vision/tracks stamp lags "
-                           "more than this behind (0 = run free); keeps a slower vision graph from losing frames.",
-                           0.0, 10.0)
+        max_lead = declare(self, "max_lead_s", 0.0, "Hold the simulation while the newest /vision/tracks stamp, or "
+                           "with wait_for_recorder the recorder's written clock, lags more than this behind (0 = run "
+                           "free); keeps a slower vision graph from losing frames and a slower disk from losing "
+                           "messages.", 0.0, 10.0)
         self._declare_start_gate()
         self.sensor = sensor_preset(declare(self, "sensor", "ideal", "Top RGB-D camera error model: ideal, stereo "
                                             "or structured_light (docs/sensors.md)."))
@@ -295,11 +296,18 @@ class LineSim(Node):
                                  self.depth_info_pub, self.side_pub, self.side_info_pub, *self.pose_pubs]
         for publisher, camera in zip(self.pose_pubs, (self.geometry.top_camera(), self.geometry.side_camera())):
             publisher.publish(_camera_pose(camera))
-        self.pacer = LeadLimiter(p.max_lead) if p.max_lead > 0 else None
-        if self.pacer is not None:
-            self.create_subscription(FilletTrackArray, topics.TRACKS,
-                                     lambda m: self.pacer.ack(stamp_to_seconds(m.header.stamp)),
-                                     QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+        self.pacers: dict[str, LeadLimiter] = {}
+        """Consumers the line keeps within max_lead_s of: the segmenter's tracks and, when waited for, the
+        recorder's written clock."""
+        if p.max_lead > 0:
+            self._pace_on("/vision/tracks", p.max_lead, FilletTrackArray, topics.TRACKS,
+                          lambda m: m.header.stamp, QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+            if self.wait_recorder:
+                self._pace_on("the recorder", p.max_lead, Clock, topics.RECORDED_CLOCK, lambda m: m.clock, 10)
+
+    def _pace_on(self, name: str, max_lead: float, msg_type, topic: str, stamp_of, qos) -> None:
+        pacer = self.pacers[name] = LeadLimiter(max_lead)
+        self.create_subscription(msg_type, topic, lambda m: pacer.ack(stamp_to_seconds(stamp_of(m))), qos)
 
     # ------------------------------------------------------------------ spawning
 
@@ -470,14 +478,13 @@ class LineSim(Node):
                                           "(a physics defect: please report it); it will be unscored")
 
     def _hold_for_consumer(self, executor, now: float) -> None:
-        """With max_lead_s: wait (serving callbacks) until /vision/tracks has caught up to within the lead."""
-        if self.pacer is None:
-            return
-        stalls = self.pacer.stalls
-        while not self._stop.is_set() and self.pacer.must_wait(now):
+        """With max_lead_s: wait (serving callbacks) until every paced consumer has caught up to within the lead."""
+        stalls = {name: pacer.stalls for name, pacer in self.pacers.items()}
+        while not self._stop.is_set() and any(pacer.must_wait(now) for pacer in self.pacers.values()):
             executor.spin_once(timeout_sec=0.005)
-        if self.pacer.stalls > stalls and self.pacer.stalls == 1:
-            self.get_logger().warning("/vision/tracks silent: running on without it until it answers")
+        for name, pacer in self.pacers.items():
+            if pacer.stalls > stalls[name] and pacer.stalls == 1:
+                self.get_logger().warning(f"{name} silent: running on without it until it answers")
 
     def _wait_for_subscribers(self, executor) -> None:
         """Hold until the consumers the start-gate parameters name are there (each costs at most a discovery)."""
