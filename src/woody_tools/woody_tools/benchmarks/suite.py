@@ -91,23 +91,24 @@ def bench_sim(seconds: float, lanes: int = LANES, speed_fpm: float = REFERENCE_S
     return figures
 
 
-def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, fillets_per_lane: int = 6) -> dict:
-    """`woody run` (the whole graph with the recorder) at ``lanes`` and ``speed_fpm``, as a subprocess: its speed,
-    its node start-up and whether every fillet got its verdict."""
-    fillets = fillets_per_lane * lanes
+def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, spawn_s: float = 10.0) -> dict:
+    """`woody run` (the whole graph with the recorder) at ``lanes`` and ``speed_fpm``, spawning for ``spawn_s`` sim
+    seconds so the line runs full, as a subprocess: its speed, its node start-up, whether every fillet got its
+    verdict and whether the recorder lost anything."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run"
-        line = ["--lanes", str(lanes), "--speed-fpm", f"{speed_fpm:g}", "--fillets", str(fillets)]
+        line = ["--lanes", str(lanes), "--speed-fpm", f"{speed_fpm:g}", "--duration", f"{spawn_s:g}"]
         demo = subprocess.run([entry_point("woody"), "run", *line, "--out", str(out)], check=True,
                               capture_output=True, text=True)
         with open(out / "verdicts.csv", newline="") as rows:
-            graded = sum(1 for row in csv.DictReader(rows) if row["verdict"])
+            fillets = list(csv.DictReader(rows))
+    graded = sum(1 for row in fillets if row["verdict"])
     rtf = re.search(r"wall: rtf ([0-9.]+)x", demo.stdout)
     started = re.search(r"the line itself, after ([0-9.]+) s of node start-up: rtf ([0-9.]+)x", demo.stdout)
     if rtf is None or started is None:
         raise RuntimeError(f"woody run did not report its speed:\n{demo.stdout[-2000:]}")
     lost = re.search(r"recorder: ([0-9]+) messages lost", demo.stdout + demo.stderr)
-    return {"lanes": lanes, "speed_fpm": speed_fpm, "woody_run_fillets": fillets, "woody_run_verdicts": graded,
+    return {"lanes": lanes, "speed_fpm": speed_fpm, "woody_run_fillets": len(fillets), "woody_run_verdicts": graded,
             "woody_run_rtf": float(rtf.group(1)), "woody_run_line_rtf": float(started.group(2)),
             "woody_run_startup_s": float(started.group(1)),
             "woody_run_recorder_lost": int(lost.group(1)) if lost else 0}
