@@ -123,9 +123,11 @@ def name_process(name: bytes) -> None:
 
 
 def parent_messages(conn: mpc.Connection, name: bytes) -> Iterator[tuple]:
-    """In the child: ignore Ctrl-C, take ``name``, and yield the parent's messages until it sends ``("close",)``,
-    closes the pipe or dies."""
+    """In the child: ignore Ctrl-C, end on SIGTERM, take ``name``, and yield the parent's messages until it sends
+    ``("close",)``, closes the pipe or dies. A forked child inherits its parent's SIGTERM handler (a node's stop
+    flag), which would leave it running when multiprocessing ends its daemons at the parent's exit."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     name_process(name)
     parent = mp.parent_process()
     waitables = [conn] + ([parent.sentinel] if parent is not None else [])
