@@ -32,6 +32,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import dask
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 
 from woody_experiments.experiment import RunSpec
@@ -42,6 +43,11 @@ WORKER_WAIT_S = 60.0
 DEFAULT_PROBE_RUNS = 4
 """Runs evaluated one at a time before the parallel phase, the one-worker reference of the scaling efficiency;
 the first only warms the worker up (its renderer, compiled kernels, the mesh) and is not timed."""
+
+WORKER_ENVIRON = {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}
+"""The environment of a local worker: Dask's default without its MALLOC_TRIM_THRESHOLD_. Setting that switches off
+glibc's adaptive mmap threshold, so every frame-sized array was mapped and unmapped afresh: a sweep worker spent
+30 % of its time in the kernel zeroing pages."""
 
 MeshRef = tuple[str, str]
 Evaluate = Callable[[RunSpec, FilletMesh], list[dict]]
@@ -138,6 +144,7 @@ def _open(scheduler: str | None, jobs: int) -> tuple:
         if scheduler:
             client = Client(scheduler, timeout="30s")
         else:
+            dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENVIRON})
             cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, silence_logs=logging.ERROR,
                                    dashboard_address="127.0.0.1:8787")  # another free port if taken
             client = Client(cluster)
