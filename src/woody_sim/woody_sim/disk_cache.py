@@ -10,6 +10,7 @@ and a result that came with warnings (a mesh converted from millimetres) is not 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import pickle
@@ -39,13 +40,20 @@ def cache_dir(kind: str) -> Path:
 def digest(code: Iterable[ModuleType], *parts: object) -> str:
     """A key for a result of ``parts`` computed by the modules ``code``: their source, the libraries' versions
     and each part (bytes as they are, anything else by its repr)."""
-    hasher = hashlib.sha256(_LIBRARIES.encode())
-    for module in code:
-        hasher.update(Path(module.__file__).read_bytes())
+    hasher = hashlib.sha256(_source_digest(tuple(code)))
     for part in parts:
         hasher.update(part if isinstance(part, bytes) else repr(part).encode())
         hasher.update(b"\0")
     return hasher.hexdigest()
+
+
+@functools.cache
+def _source_digest(code: tuple[ModuleType, ...]) -> bytes:
+    """The libraries' versions and the modules' source, read once per process (a sweep keys every run)."""
+    hasher = hashlib.sha256(_LIBRARIES.encode())
+    for module in code:
+        hasher.update(Path(module.__file__).read_bytes())
+    return hasher.digest()
 
 
 def cached(kind: str, key: str, compute: Callable[[], T], result_type: type) -> T:

@@ -122,10 +122,10 @@ class SplitLineWorld:
 
     def _send_mesh(self, worker: _Worker, mesh: FilletMesh) -> int:
         """The mesh's key, the mesh and its chain model sent to ``worker`` first if it has not had them."""
-        self.model_for(mesh)
+        model = self.model_for(mesh)
         key = self._mesh_keys[mesh]
         if key not in worker.meshes:
-            worker.process.send(("mesh", key, mesh, self._local.model_for(mesh)))
+            worker.process.send(("mesh", key, mesh, model))
             worker.meshes.add(key)
         return key
 

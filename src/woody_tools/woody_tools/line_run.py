@@ -160,15 +160,15 @@ class LineMonitor:
         self.gate_commands: set[tuple[int, int]] = set()
         """(lane, fillet id) of every GateCommand: the fillets the gate acted on in time."""
         self.sim_time = 0.0
-        self.first_clock: tuple[float, float] | None = None
+        self.first_frame: tuple[float, float] | None = None
         """(wall monotonic, sim s) of the first top camera frame: when the line itself started, after the nodes'
         start-up. Sim time is followed by the frames' 30 Hz camera_info, not /clock's 200+ Hz: each message costs
         this process a callback."""
-        self.last_clock: tuple[float, float] | None = None
+        self.last_frame: tuple[float, float] | None = None
         self.node.create_subscription(FilletSpawn, topics.GROUND_TRUTH, self._on_spawn, latched)
         self.node.create_subscription(FilletVerdict, topics.VERDICTS, self._on_verdict, reliable)
         self.node.create_subscription(GateCommand, topics.GATE_COMMANDS, self._on_gate, reliable)
-        self.node.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self._on_clock, 10)
+        self.node.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self._on_frame, 10)
 
     def _on_spawn(self, msg) -> None:
         self.spawns.append(spawn_from_msg(msg))
@@ -179,18 +179,18 @@ class LineMonitor:
     def _on_gate(self, msg) -> None:
         self.gate_commands.add((msg.lane, msg.fillet_id))
 
-    def _on_clock(self, msg) -> None:
+    def _on_frame(self, msg) -> None:
         self.sim_time = stamp_to_seconds(msg.header.stamp)
-        self.last_clock = (time.monotonic(), self.sim_time)
-        self.first_clock = self.first_clock or self.last_clock
+        self.last_frame = (time.monotonic(), self.sim_time)
+        self.first_frame = self.first_frame or self.last_frame
 
     def line_rtf(self, nodes_started: float) -> tuple[float, float] | None:
         """(sim s per wall s since the line's first frame, wall s from ``nodes_started`` to it); None before two
         frames."""
-        if self.first_clock is None or self.last_clock[0] <= self.first_clock[0]:
+        if self.first_frame is None or self.last_frame[0] <= self.first_frame[0]:
             return None
-        wall = self.last_clock[0] - self.first_clock[0]
-        return (self.last_clock[1] - self.first_clock[1]) / wall, self.first_clock[0] - nodes_started
+        wall = self.last_frame[0] - self.first_frame[0]
+        return (self.last_frame[1] - self.first_frame[1]) / wall, self.first_frame[0] - nodes_started
 
     def spin(self, seconds: float) -> None:
         deadline = time.monotonic() + seconds
