@@ -93,7 +93,7 @@ from woody_bag.qos import qos_profiles_yaml
 from woody_bag.schemas import message_class, message_definition
 from woody_bag.summary import LOSSES_RECORD, losses_record
 from woody_bag.writer import BagWriter
-from woody_common.ros_params import check_overrides, run_node, usage
+from woody_common.ros_params import check_overrides, declare, run_node, usage
 from woody_common.topics import RECORDED_CLOCK
 
 DEFAULT_EXCLUDE = r"^/(rosout|parameter_events)$|/_"
@@ -115,34 +115,27 @@ class Recorder(Node):
 
     def __init__(self) -> None:
         super().__init__("recorder")
-        self._declare()
+        given = self._declare()
         check_overrides(self)  # before the bag is opened; run_node turns the ValueError into one line
-        p = self.get_parameter
-        output = p("output").value or f"bags/{time.strftime('%Y%m%d-%H%M%S')}.mcap"
+        output = given["output"] or f"bags/{time.strftime('%Y%m%d-%H%M%S')}.mcap"
         topics = self.get_parameter_or("topics", Parameter("topics", Parameter.Type.STRING_ARRAY, [])).value
         self._topics = {t if t.startswith("/") else "/" + t for t in (topics or []) if t}
-        self._regex = self._compile("topic_regex", p("topic_regex").value)
-        self._exclude = self._compile("exclude_regex", p("exclude_regex").value)
-        self._depth = int(p("queue_depth").value)
-        discovery_period = float(p("discovery_period").value)
-        self._flush_period = float(p("flush_period").value)
-        self._max_buffer = int(p("max_buffer_mb").value) * 1024 * 1024
-        if discovery_period <= 0 or self._flush_period <= 0:
-            raise ConfigError("discovery_period and flush_period must be > 0")
-        if self._depth < 1 or self._max_buffer <= 0 or int(p("chunk_size").value) < 1:
-            raise ConfigError("queue_depth, max_buffer_mb and chunk_size must be >= 1")
+        self._regex = self._compile("topic_regex", given["topic_regex"])
+        self._exclude = self._compile("exclude_regex", given["exclude_regex"])
+        self._depth = given["queue_depth"]
+        self._flush_period = given["flush_period"]
+        self._max_buffer = given["max_buffer_mb"] * 1024 * 1024
         run_info = {
             "recorder": "woody_bag.recorder_node", "topics": sorted(self._topics),
-            "topic_regex": p("topic_regex").value, "exclude_regex": p("exclude_regex").value,
-            "use_sim_time": bool(p("use_sim_time").value), "start_unix_ns": time.time_ns(),
+            "topic_regex": given["topic_regex"], "exclude_regex": given["exclude_regex"],
+            "use_sim_time": bool(self.get_parameter("use_sim_time").value), "start_unix_ns": time.time_ns(),
             "log_time": "system (wall) clock at reception, ns since the Unix epoch",
             "publish_time": "publisher's source timestamp (wall clock)",
-            "run_settings": p("run_settings").value,
+            "run_settings": given["run_settings"],
         }
         try:
-            self._writer = BagWriter(output, chunk_size=int(p("chunk_size").value),
-                                     compression=p("compression").value,
-                                     compression_level=int(p("compression_level").value), metadata=run_info)
+            self._writer = BagWriter(output, chunk_size=given["chunk_size"], compression=given["compression"],
+                                     compression_level=given["compression_level"], metadata=run_info)
         except BagError as exc:
             raise ConfigError(str(exc)) from None
         self.output = self._writer.path
@@ -166,7 +159,7 @@ class Recorder(Node):
         self._discover()
         # Steady clock: with use_sim_time the graph's /clock may only start once we subscribe.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(discovery_period, self._discover, clock=steady)
+        self.create_timer(given["discovery_period"], self._discover, clock=steady)
         self.create_timer(ANNOUNCE_PERIOD_S, self._announce_written_clock, clock=steady)
         self.get_logger().info(
             f"recording to {self.output} ({'topics ' + ', '.join(sorted(self._topics)) if self._topics else ''}"
@@ -174,28 +167,30 @@ class Recorder(Node):
             f"{'all topics' if not self._topics and not self._regex else ''}); log_time = wall clock at reception")
 
     # ------------------------------------------------------------------ parameters
-    def _declare(self) -> None:
-        def desc(text: str, kind: int, **kw) -> ParameterDescriptor:
-            return ParameterDescriptor(description=text, type=kind, read_only=True, **kw)
-
-        S, D, INT, SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_DOUBLE,
-                       ParameterType.PARAMETER_INTEGER, ParameterType.PARAMETER_STRING_ARRAY)
-        self.declare_parameter("output", "", desc("path of the .mcap (default bags/<timestamp>.mcap)", S))
-        self.declare_parameter("topics", Parameter.Type.STRING_ARRAY,
-                               desc("topics to record; empty = all importable topics", SA))
-        self.declare_parameter("topic_regex", "", desc("also record topics matching this regex", S))
-        self.declare_parameter("exclude_regex", DEFAULT_EXCLUDE, desc("never record topics matching this", S))
-        self.declare_parameter("discovery_period", 0.5, desc("seconds between searches for new topics", D))
-        self.declare_parameter("queue_depth", 1000, desc("keep-last depth of each subscription", INT))
-        self.declare_parameter("compression", "zstd", desc("chunk compression: zstd, lz4 or none", S))
-        self.declare_parameter("compression_level", 1, desc("zstd level (1 keeps up with 200 Hz images)", INT))
-        self.declare_parameter("chunk_size", 4 * 1024 * 1024, desc("bytes per MCAP chunk", INT))
-        self.declare_parameter("flush_period", 1.0, desc("max seconds a message waits before its chunk is "
-                                                         "written (what a SIGKILL can lose)", D))
-        self.declare_parameter("max_buffer_mb", 512, desc("received but unwritten data held in memory", INT))
-        self.declare_parameter("run_settings", "", desc("JSON object of the recorded run's settings, kept in the "
-                                                        "bag's woody metadata record (woody report rebuilds its "
-                                                        "settings table from it)", S))
+    def _declare(self) -> dict:
+        """Declare every parameter (numbers with their range, so NaN, infinity and values outside are refused with
+        one line before the bag is opened); the values given, by name."""
+        self.declare_parameter("topics", Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+            description="topics to record; empty = all importable topics", type=ParameterType.PARAMETER_STRING_ARRAY,
+            read_only=True))
+        return {
+            "output": declare(self, "output", "", "path of the .mcap (default bags/<timestamp>.mcap)"),
+            "topic_regex": declare(self, "topic_regex", "", "also record topics matching this regex"),
+            "exclude_regex": declare(self, "exclude_regex", DEFAULT_EXCLUDE, "never record topics matching this"),
+            "discovery_period": declare(self, "discovery_period", 0.5, "seconds between searches for new topics",
+                                        0.01, 60.0),
+            "queue_depth": declare(self, "queue_depth", 1000, "keep-last depth of each subscription", 1, 100_000),
+            "compression": declare(self, "compression", "zstd", "chunk compression: zstd, lz4 or none"),
+            "compression_level": declare(self, "compression_level", 1, "zstd level (1 keeps up with 200 Hz images)",
+                                         1, 22),
+            "chunk_size": declare(self, "chunk_size", 4 * 1024 * 1024, "bytes per MCAP chunk", 1, 1024 ** 3),
+            "flush_period": declare(self, "flush_period", 1.0, "max seconds a message waits before its chunk is "
+                                    "written (what a SIGKILL can lose)", 0.01, 60.0),
+            "max_buffer_mb": declare(self, "max_buffer_mb", 512, "received but unwritten data held in memory",
+                                     1, 65_536),
+            "run_settings": declare(self, "run_settings", "", "JSON object of the recorded run's settings, kept in the "
+                                    "bag's woody metadata record (woody report rebuilds its settings table from it)"),
+        }
 
     def _compile(self, name: str, pattern: str) -> re.Pattern | None:
         if not pattern:
