@@ -8,7 +8,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point
 from std_msgs.msg import Header
 
-from woody_msgs.msg import FilletSpawn, FilletTrack, FilletTrackArray, FilletVerdict, GateCommand
+from woody_msgs.msg import FilletSpawn, FilletTrack, FilletTrackArray, FilletVerdict, GateCommand, SideMetrics
 from woody_msgs.srv import SpawnFillet
 
 
@@ -29,7 +29,7 @@ def samples() -> dict[str, object]:
         header=header(), fillet_id=7, lane=2, classification=FilletVerdict.CLASS_WOODY, grade="severe",
         unscored_reason="", phi=5.4, hu_term=0.05, solidity_term=0.004, threshold=10.0,
         moderate_threshold=12.0, severe_threshold=8.0, reference_stamp=Time(sec=12, nanosec=0),
-        frames_in_window=6, side_measured=True, nmdm=0.78, mdm=68.3, be=19.3,
+        frames_in_window=6,
     )
     return {
         "FilletTrack": track(),
@@ -41,6 +41,8 @@ def samples() -> dict[str, object]:
                                    width=0.1, thickness=0.024, position=Point(x=-1.0, y=0.0, z=0.0)),
         "GateCommand": GateCommand(header=header(), lane=2, fillet_id=7, actuation_time=Time(sec=13, nanosec=5),
                                    open_duration=0.35, phi=5.4),
+        "SideMetrics": SideMetrics(header=header("side_camera_optical_frame"), fillet_id=7, lane=1, measured=True,
+                                   reason="", nmdm=0.78, mdm=68.3, be=19.3),
     }
 
 

@@ -4,8 +4,9 @@ is absent with the reason.
 The line is `woody run --fillets 12` (seed 7: four fillets in the side camera's lane) with its grader disturbed:
 paused (SIGSTOP) for a second every 1.5 s, started from an empty numba cache, or sharing the two cores with two
 busy loops. Each verdict must match the same run undisturbed (warm cache, idle machine) within the run-to-run
-spread, or have the disturbed value absent (NaN) with the reason in ``unscored_reason``. The same camera topics
-replayed twice into the same live segmenter, grader and reject gate must give the same verdicts twice.
+spread, or have the disturbed value absent (NaN) with the reason in ``unscored_reason`` (or, for the side view's
+NMDM, MDM and BE, in its /grading/side_metrics ``reason``). The same camera topics replayed twice into the same
+live segmenter, grader and reject gate must give the same verdicts twice.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -65,11 +67,36 @@ def run_line(out: Path, env: dict | None = None, during=None) -> list:
     return recorded_verdicts(out / "line.mcap")
 
 
-def recorded_verdicts(bag: Path) -> list:
+@dataclass(frozen=True)
+class Graded:
+    """A verdict with its side metrics (paired by fillet id): NMDM, MDM and BE are NaN when not measured, and the
+    side's reason joins the verdict's ``unscored_reason``; everything else is the verdict's."""
+
+    verdict: object
+    side: object | None = None
+
+    def __getattr__(self, name: str):
+        if name in ("nmdm", "mdm", "be"):
+            return getattr(self.side, name) if self.side is not None else math.nan
+        if name == "unscored_reason":
+            reasons = (self.verdict.unscored_reason, self.side.reason if self.side is not None else "")
+            return "; ".join(r for r in reasons if r)
+        return getattr(self.verdict, name)
+
+
+def graded(verdicts: list, sides: list) -> list[Graded]:
+    by_fillet = {m.fillet_id: m for m in sides}
+    return [Graded(v, by_fillet.get(v.fillet_id)) for v in verdicts]
+
+
+def recorded_verdicts(bag: Path) -> list[Graded]:
     from woody_bag.reader import read_bag
     from woody_bag.schemas import decode
 
-    return [decode(t, d) for _, t, d, _ in read_bag(bag, topics=["/grading/verdicts"])]
+    messages = {"/grading/verdicts": [], "/grading/side_metrics": []}
+    for topic, type_name, data, _ in read_bag(bag, topics=list(messages)):
+        messages[topic].append(decode(type_name, data))
+    return graded(*messages.values())
 
 
 def measured_every_watched_fillet(out: Path, env_of_a_run=lambda: None, check=lambda verdicts: None) -> list:
@@ -194,10 +221,13 @@ def test_two_cpu_hogs_beside_the_line_change_no_published_value(warm, tmp_path):
 
 
 def test_the_same_camera_topics_replayed_twice_give_the_same_verdicts_twice(ros_node, ros_domain, tmp_path):
-    from woody_msgs.msg import FilletVerdict
+    from woody_msgs.msg import FilletVerdict, SideMetrics
 
     received: list = []
+    sides: list = []
     ros_node.create_subscription(FilletVerdict, "/grading/verdicts", received.append,
+                                 QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+    ros_node.create_subscription(SideMetrics, "/grading/side_metrics", sides.append,
                                  QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
     params = {"use_sim_time": True, "lanes": 3}
     nodes = [NodeProcess(name, params, domain_id=ros_domain, log_dir=tmp_path)
@@ -205,7 +235,7 @@ def test_the_same_camera_topics_replayed_twice_give_the_same_verdicts_twice(ros_
     try:
         assert spin_until(ros_node, lambda: ros_node.count_subscribers("/vision/tracks") >= 1
                           and ros_node.count_subscribers("/grading/verdicts") >= 2, timeout=60.0)
-        passes = [replay_pass(ros_node, ros_domain, tmp_path / f"replay{i}", received) for i in range(2)]
+        passes = [replay_pass(ros_node, ros_domain, tmp_path / f"replay{i}", received, sides) for i in range(2)]
     finally:
         for node in nodes:
             node.stop()
@@ -218,15 +248,16 @@ def test_the_same_camera_topics_replayed_twice_give_the_same_verdicts_twice(ros_
         assert log.count("sim time went back") == 1, f"{name}: one line when the second pass starts\n{log}"
 
 
-def replay_pass(ros_node, ros_domain: int, log_dir: Path, received: list) -> list:
-    """Replay the sample's camera topics (and its /clock) once; the verdicts that came of it."""
-    start = len(received)
+def replay_pass(ros_node, ros_domain: int, log_dir: Path, received: list, sides: list) -> list[Graded]:
+    """Replay the sample's camera topics (and its /clock) once; the verdicts that came of it, with their side
+    metrics."""
+    start, sides_start = len(received), len(sides)
     replay = NodeProcess("woody", None, domain_id=ros_domain, log_dir=log_dir,
                          extra_args=["replay", str(SAMPLE), "--topics", *CAMERA_TOPICS])
     spin_until(ros_node, lambda: not replay.alive(), timeout=120.0)
-    spin_until(ros_node, lambda: len(received) >= start + 3, timeout=10.0)
+    spin_until(ros_node, lambda: len(received) >= start + 3 and len(sides) > sides_start, timeout=10.0)
     assert replay.stop() == 0, replay.log_tail()
-    return received[start:]
+    return graded(received[start:], sides[sides_start:])
 
 
 def fields(verdict) -> tuple:

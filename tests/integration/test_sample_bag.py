@@ -8,6 +8,7 @@ import math
 import re
 import subprocess
 import sys
+from dataclasses import dataclass, field
 
 import pytest
 from conftest import REPO, spin_until
@@ -24,11 +25,27 @@ CAMERA_TOPICS = ["/top_camera/depth/image_raw", "/top_camera/depth/camera_info",
 COLOUR = "/top_camera/color/image_raw"
 
 
-def recorded_verdicts():
+def recorded(topic: str = "/grading/verdicts") -> list:
     from woody_bag.reader import read_bag
     from woody_bag.schemas import decode
 
-    return [decode(t, d) for _, t, d, _ in read_bag(SAMPLE, topics=["/grading/verdicts"])]
+    return [decode(t, d) for _, t, d, _ in read_bag(SAMPLE, topics=[topic])]
+
+
+def recorded_verdicts() -> list:
+    return recorded("/grading/verdicts")
+
+
+def recorded_sides() -> list:
+    return recorded("/grading/side_metrics")
+
+
+@dataclass
+class Heard:
+    """What one line's grader published during a replay."""
+
+    verdicts: list = field(default_factory=list)
+    sides: list = field(default_factory=list)
 
 
 def test_sample_bag_opens_with_rosbags_and_mcap():
@@ -44,22 +61,26 @@ def test_sample_bag_opens_with_rosbags_and_mcap():
     assert (image.width, image.height, image.encoding) == (672, 376, "32FC1")
     verdicts = [m.ros_msg for m in read_ros2_messages(str(SAMPLE), topics=["/grading/verdicts"])]
     assert len(verdicts) == len(recorded_verdicts()) == 3
+    sides = [m.ros_msg for m in read_ros2_messages(str(SAMPLE), topics=["/grading/side_metrics"])]
+    assert len(sides) == len(recorded_sides()) == 1 and sides[0].measured and math.isfinite(sides[0].nmdm)
 
 
 def replay_into_vision(bag, topics, ros_node, ros_domain, tmp_path, segmenter_params=None,
-                       lines: dict[str, dict] | None = None) -> tuple[dict[str, list], str]:
+                       lines: dict[str, dict] | None = None) -> tuple[dict[str, Heard], str]:
     """Replay ``topics`` of ``bag`` into a segmenter and a grader per line (namespace: grader parameters).
 
-    Returns the verdicts received per namespace and the processes' logs.
+    Returns the verdicts and side metrics received per namespace and the processes' logs.
     """
-    from woody_msgs.msg import FilletVerdict
+    from woody_msgs.msg import FilletVerdict, SideMetrics
 
     lines = {"": {}} if lines is None else lines
-    received: dict[str, list] = {ns: [] for ns in lines}
+    received = {ns: Heard() for ns in lines}
     vision = {"use_sim_time": True, "lanes": 3}
     processes = []
     for ns, grader_params in lines.items():
-        ros_node.create_subscription(FilletVerdict, f"{ns}/grading/verdicts", received[ns].append,
+        ros_node.create_subscription(FilletVerdict, f"{ns}/grading/verdicts", received[ns].verdicts.append,
+                                     QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+        ros_node.create_subscription(SideMetrics, f"{ns}/grading/side_metrics", received[ns].sides.append,
                                      QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
         log_dir = tmp_path / (ns.strip("/") or "root")
         processes += [NodeProcess("segmenter", {**vision, **(segmenter_params or {})}, domain_id=ros_domain,
@@ -73,10 +94,11 @@ def replay_into_vision(bag, topics, ros_node, ros_domain, tmp_path, segmenter_pa
     replays = [NodeProcess("woody", None, domain_id=ros_domain, log_dir=tmp_path / f"replay{i}",
                            extra_args=["replay", str(bag), "--topics", *topics, "--namespace", ns])
                for i, ns in enumerate(lines)]
-    expected = len(recorded_verdicts())
+    expected = len(recorded_verdicts()), len(recorded_sides())
     try:
         spin_until(ros_node, lambda: not any(r.alive() for r in replays), timeout=120.0)
-        spin_until(ros_node, lambda: all(len(v) >= expected for v in received.values()), timeout=5.0)
+        spin_until(ros_node, lambda: all((len(h.verdicts), len(h.sides)) >= expected for h in received.values()),
+                   timeout=5.0)
     finally:
         codes = [r.stop() for r in replays]
         for node in processes:
@@ -86,7 +108,9 @@ def replay_into_vision(bag, topics, ros_node, ros_domain, tmp_path, segmenter_pa
     return received, logs
 
 
-def assert_same_verdicts(received, expected, logs: str, phi_rel: float = 1e-6) -> None:
+def assert_same_verdicts(heard: Heard, logs: str, phi_rel: float = 1e-6) -> None:
+    """The sample's verdicts and side metrics again: same lanes, classes, crossing stamps, Φ within ``phi_rel``."""
+    received, expected = heard.verdicts, recorded_verdicts()
     seen = [(v.lane, round(stamp_to_seconds(v.header.stamp), 3), v.classification, v.unscored_reason) for v in received]
     assert len(received) == len(expected), f"{seen}\n{logs}"
 
@@ -97,8 +121,10 @@ def assert_same_verdicts(received, expected, logs: str, phi_rel: float = 1e-6) -
         assert (got.lane, got.classification, got.header.stamp) == (want.lane, want.classification,
                                                                     want.header.stamp), (got.unscored_reason, logs)
         assert got.phi == pytest.approx(want.phi, rel=phi_rel)
-        assert got.side_measured == want.side_measured
-        if want.side_measured:
+    assert len(heard.sides) == len(recorded_sides()), logs
+    for got, want in zip(sorted(heard.sides, key=key), sorted(recorded_sides(), key=key)):
+        assert (got.lane, got.header.stamp, got.measured) == (want.lane, want.header.stamp, want.measured)
+        if want.measured:
             assert got.nmdm == pytest.approx(want.nmdm, rel=1e-6) and got.be == pytest.approx(want.be, rel=1e-6)
         else:
             assert math.isnan(got.nmdm)
@@ -110,7 +136,7 @@ def test_replaying_the_sample_into_segmenter_and_grader_reproduces_its_verdicts(
     markers: list = []
     ros_node.create_subscription(ImageMarker, "/grading/markers", markers.append, 500)
     received, logs = replay_into_vision(SAMPLE, CAMERA_TOPICS, ros_node, ros_domain, tmp_path)
-    assert_same_verdicts(received[""], recorded_verdicts(), logs)
+    assert_same_verdicts(received[""], logs)
     # the overlay Foxglove draws on the top image: every track's contour, named by lane and verdict
     assert markers and all(m.type == ImageMarker.POLYGON and len(m.points) >= 3 for m in markers)
     labels = {m.ns.split("/")[1] for m in markers}
@@ -156,7 +182,7 @@ def test_16uc1_depth_and_bgr8_colour_over_best_effort_give_the_same_verdicts(ros
     assert "Traceback" not in logs and "FrameError" not in logs, logs
     # Same class, lane, crossing stamp and side metrics; Φ moves (2-19 % on these three fillets) because
     # millimetre depth shifts the 5 mm height threshold by up to half a step on the fillets' thin edges.
-    assert_same_verdicts(received[""], recorded_verdicts(), logs, phi_rel=0.25)
+    assert_same_verdicts(received[""], logs, phi_rel=0.25)
 
 
 def test_outline_from_the_registered_colour_gives_the_same_classes(ros_node, ros_domain, tmp_path):
@@ -171,7 +197,7 @@ def test_outline_from_the_registered_colour_gives_the_same_classes(ros_node, ros
     # Pairing by stamp works: only frames whose colour was lost over best effort are skipped (a few %, more on a
     # loaded machine: 9 of 179 in one CI run), never most of them.
     assert skipped and int(skipped[2]) <= 0.2 * int(skipped[1]), logs
-    assert_same_verdicts(received[""], recorded_verdicts(), logs, phi_rel=1.0)
+    assert_same_verdicts(received[""], logs, phi_rel=1.0)
 
 
 def test_two_namespaced_lines_share_a_domain_without_crosstalk(ros_node, ros_domain, tmp_path):
@@ -186,9 +212,9 @@ def test_two_namespaced_lines_share_a_domain_without_crosstalk(ros_node, ros_dom
 
     ros_node.create_subscription(FilletVerdict, "/grading/verdicts", root.append, 10)
     received, logs = replay_into_vision(SAMPLE, CAMERA_TOPICS, ros_node, ros_domain, tmp_path, lines=lines)
-    assert_same_verdicts(received["/line1"], recorded_verdicts(), logs)
-    assert len(received["/line2"]) == 3
-    assert {v.classification for v in received["/line2"]} == {FilletVerdict.CLASS_WOODY}
+    assert_same_verdicts(received["/line1"], logs)
+    assert len(received["/line2"].verdicts) == 3
+    assert {v.classification for v in received["/line2"].verdicts} == {FilletVerdict.CLASS_WOODY}
     assert root == [] and "out-of-order" not in logs, logs
 
 

@@ -69,13 +69,15 @@ def test_line_sim_publishes_every_topic_at_its_rate(ros_node, ros_domain, tmp_pa
 
 
 def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_path):
-    from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
+    from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand, SideMetrics
 
     verdicts: list = []
+    sides: list = []
     commands: list = []
     spawns: list = []
     reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     ros_node.create_subscription(FilletVerdict, "/grading/verdicts", verdicts.append, reliable)
+    ros_node.create_subscription(SideMetrics, "/grading/side_metrics", sides.append, reliable)
     ros_node.create_subscription(GateCommand, "/reject_gate/commands", commands.append, reliable)
     ros_node.create_subscription(FilletSpawn, "/line/ground_truth", spawns.append,
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
@@ -107,7 +109,9 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
     scored = [v for v in verdicts if v.classification != FilletVerdict.CLASS_UNSCORED]
     assert len(scored) >= 5, f"{[v.unscored_reason for v in verdicts]}\n{logs}"
     assert all(np.isfinite(v.phi) and v.phi >= 0 for v in scored)
-    assert any(v.side_measured and np.isfinite(v.nmdm) for v in verdicts if v.lane == 1), "no side-view metrics"
+    watched = sorted(v.fillet_id for v in verdicts if v.lane == 1)
+    assert sorted(m.fillet_id for m in sides) == watched, "one side result per watched-lane verdict"
+    assert all(m.lane == 1 for m in sides) and any(m.measured and np.isfinite(m.nmdm) for m in sides), logs
     woody = [v for v in verdicts if v.classification == FilletVerdict.CLASS_WOODY]
     assert len(commands) == len(woody) and {c.fillet_id for c in commands} == {v.fillet_id for v in woody}
 

@@ -1,4 +1,4 @@
-"""FilletGrader: one verdict per fillet, and the watched lane's verdict paired with its side-view passage."""
+"""FilletGrader: one verdict per fillet at its window's close, and the watched lane's side results apart."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from woody_vision.grader_core import (
     SIDE_MATCH_SLACK_S,
     FilletGrader,
     GradedFillet,
+    SideResult,
     TrackObservation,
 )
 from woody_vision.grading import GradingRules
@@ -76,7 +77,7 @@ def test_one_verdict_per_track_even_with_frames_after_the_window_closed():
     out = feed(grader, 7, 0, shapes, end=True, extra_after=5)
     assert len(out) == 1
     stamp, verdict = out[0]
-    assert verdict.fillet_id == 7 and verdict.lane == 0 and verdict.scored and verdict.side is None
+    assert verdict.fillet_id == 7 and verdict.lane == 0 and verdict.scored
     assert verdict.shape.status == STATUS_SCORED and stamp == verdict.shape.stamp < 90 / FPS
     assert verdict.label == "woody" and verdict.shape.phi < 1e-6  # unchanged outline: stiff
     assert grader.release(1e9) == []
@@ -98,10 +99,11 @@ def test_unscored_verdict_when_the_track_ends_in_the_window():
     shapes = contours(90)
     closes = int(round(closing_stamp(shapes) * FPS))
     out = feed(grader, 3, WATCHED, shapes[: closes - 1], end=True)  # the window is open well before it closes
-    ((_, verdict),) = out  # unscored watched-lane verdicts are not held for the side view
+    ((_, verdict),) = out
     assert verdict.label == "unscored" and verdict.grade == "" and not verdict.scored
     assert verdict.shape.reason == REASON_LOST_IN_WINDOW and verdict.lane == WATCHED
-    assert grader.release(1e9) == []
+    (result,) = grader.release(1e9)  # an unscored watched-lane fillet still gets its side result
+    assert result.fillet_id == 3 and result.stamp == verdict.shape.stamp and result.side is None
 
 
 def test_a_piece_split_off_past_the_edge_gets_no_verdict_but_a_fillet_appearing_there_alone_does():
@@ -134,90 +136,76 @@ def test_unseen_observations_do_not_feed_the_evaluator():
     assert verdict.scored and verdict.shape.phi < 1e-6
 
 
-def test_watched_lane_verdict_waits_for_its_side_measurement():
+def watched_verdict(grader: FilletGrader, track_id: int, shapes, t0: float = 0.0) -> GradedFillet:
+    """Feed a watched-lane track through its window's close: its verdict comes out at the close, never held."""
+    ((stamp, verdict),) = [(s, v) for s, v in feed(grader, track_id, WATCHED, through_close(shapes), t0)]
+    assert stamp == pytest.approx(verdict.shape.stamp) == pytest.approx(closing_stamp(shapes, t0))
+    return verdict
+
+
+def test_watched_lane_verdict_goes_out_at_once_and_its_side_result_when_the_passage_ends():
     grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
     shapes = contours(120)
-    close = closing_stamp(shapes)
-    held = feed(grader, 5, WATCHED, through_close(shapes, extra=10))
-    assert held == [], "held until the side passage ends"
-    assert grader.release(close + 0.5 * WAIT) == []
-    released = grader.on_side(side(close - 0.1, close + 0.3, nmdm=0.42))
-    assert len(released) == 1
-    verdict = released[0]
-    assert verdict.fillet_id == 5 and verdict.side is not None and verdict.side.nmdm == 0.42
-    assert verdict.shape.stamp == pytest.approx(close)
-    # no second verdict: not when the wait runs out, nor when the track ends
+    verdict = watched_verdict(grader, 5, shapes)
+    close = verdict.shape.stamp
+    assert grader.release(close + 0.5 * WAIT) == [], "the side result waits for the side passage"
+    (result,) = grader.on_side(side(close - 0.1, close + 0.3, nmdm=0.42))
+    assert result == SideResult(5, WATCHED, close, result.side, "") and result.side.nmdm == 0.42
+    # one side result per fillet: none when the wait runs out, no verdict when the track ends
     assert grader.release(close + 10 * WAIT) == []
     assert grader.on_tracks(close + 11 * WAIT, [], ended_ids=[5]) == []
 
 
-def test_watched_lane_verdict_released_after_side_wait_without_a_measurement():
+def test_side_result_after_side_wait_without_a_measurement_says_why():
     grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
-    shapes = contours(90)
-    close = closing_stamp(shapes)
-    assert feed(grader, 6, WATCHED, through_close(shapes)) == []
+    close = watched_verdict(grader, 6, contours(90)).shape.stamp
     assert grader.release(close + WAIT - 0.01) == []
-    released = grader.release(close + WAIT)
-    assert len(released) == 1 and released[0].fillet_id == 6 and released[0].side is None
+    (result,) = grader.release(close + WAIT)
+    assert result.fillet_id == 6 and result.side is None and result.reason == REASON_NO_SIDE.format(WAIT)
     assert grader.release(close + 2 * WAIT) == []
 
 
-def test_released_by_later_top_frames_too():
-    """The grader's own frames advance its clock: a held verdict comes out with the first frame past the wait."""
-    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
-    shapes = contours(90)
-    close = closing_stamp(shapes)
-    out = feed(grader, 8, WATCHED, shapes + [shapes[-1]] * 40)
-    ((stamp, verdict),) = out
-    assert verdict.fillet_id == 8 and verdict.side is None
-    assert close + WAIT <= stamp < close + WAIT + 1.5 / FPS
-
-
-def test_side_measurement_that_arrived_first_is_paired_at_once():
+def test_side_measurement_that_arrived_first_is_paired_at_the_next_release():
     grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
     shapes = contours(90)
     close = closing_stamp(shapes)
     assert grader.on_side(side(close - 0.4, close - 0.1)) == []  # within the slack before the closing frame
-    out = feed(grader, 9, WATCHED, through_close(shapes))
-    ((stamp, verdict),) = out
-    assert stamp == pytest.approx(close) and verdict.side is not None
+    watched_verdict(grader, 9, shapes)
+    (result,) = grader.release(close)
+    assert result.fillet_id == 9 and result.side is not None
 
 
 def test_side_measurement_of_another_time_is_not_attached():
     grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
-    shapes = contours(90)
     t0 = 5.0
-    close = closing_stamp(shapes, t0)
-    assert feed(grader, 10, WATCHED, through_close(shapes), t0=t0) == []
+    close = watched_verdict(grader, 10, contours(90), t0=t0).shape.stamp
     assert grader.on_side(side(close - 3.0, close - 2.0)) == []
     assert grader.on_side(side(close + SIDE_MATCH_SLACK_S + 0.05, close + 0.6)) == []
-    (verdict,) = grader.release(close + WAIT)
-    assert verdict.side is None
+    (result,) = grader.release(close + WAIT)
+    assert result.side is None
 
 
 def test_two_watched_fillets_each_get_their_own_side_measurement():
     grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
     shapes = contours(90)
-    close_a = closing_stamp(shapes, 0.0)
+    close_a = watched_verdict(grader, 11, shapes, t0=0.0).shape.stamp
     close_b = closing_stamp(shapes, 1.0)
-    assert feed(grader, 11, WATCHED, through_close(shapes), t0=0.0) == []
     later = side(close_b - 0.1, close_b + 0.2, nmdm=0.8)
     assert grader.on_side(later) == [], "B's passage does not overlap A's window"
     (a,) = grader.on_side(side(close_a - 0.1, close_a + 0.2, nmdm=0.4))
     assert a.fillet_id == 11 and a.side.nmdm == 0.4
-    out = feed(grader, 12, WATCHED, through_close(shapes), t0=1.0)
-    ((_, b),) = out
+    watched_verdict(grader, 12, shapes, t0=1.0)
+    (b,) = grader.release(close_b)
     assert b.fillet_id == 12 and b.side is later
 
 
-def test_other_lanes_and_no_watched_lane_are_immediate():
+def test_other_lanes_and_no_watched_lane_have_no_side_results():
     for watched in (None, WATCHED):
         grader = FilletGrader(EDGE, watched_lane=watched)
         lane = 0 if watched is not None else WATCHED
-        shapes = contours(90)
-        out = feed(grader, 13, lane, shapes)
-        ((stamp, verdict),) = out
-        assert stamp == pytest.approx(verdict.shape.stamp) and verdict.side is None
+        ((stamp, verdict),) = feed(grader, 13, lane, contours(90))
+        assert stamp == pytest.approx(verdict.shape.stamp) and verdict.reason == ""
+        assert grader.release(1e9) == [] and grader.on_side(side(stamp - 0.1, stamp + 0.2)) == []
 
 
 def test_many_tracks_in_one_frame_each_get_one_verdict():
@@ -240,28 +228,17 @@ def test_grader_validates_its_options():
     assert math.isinf(FilletGrader(EDGE).now)
 
 
-def test_a_side_passage_with_lost_frames_gives_the_verdict_no_side_metrics_but_the_reason():
+def test_a_side_passage_with_lost_frames_gives_no_side_metrics_but_the_reason():
     grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
-    shapes = contours(90)
-    close = closing_stamp(shapes)
-    assert feed(grader, 14, WATCHED, through_close(shapes)) == []
+    verdict = watched_verdict(grader, 14, contours(90))
+    close = verdict.shape.stamp
+    assert verdict.scored and verdict.reason == ""
     nan = math.nan
     partial = SideMeasurement(nmdm=nan, mdm_min_px=nan, be=nan, h_px=nan, stamp_of_min=nan, first_stamp=close - 0.1,
                               last_stamp=close + 0.3, frames=12, reason="side view absent: frames lost in the passage")
-    (verdict,) = grader.on_side(partial)
-    assert verdict.scored and verdict.side is partial and math.isnan(verdict.side.nmdm)
-    assert verdict.reason == "side view absent: frames lost in the passage"
-
-
-def test_a_verdict_released_without_its_side_passage_says_why():
-    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
-    shapes = contours(90)
-    close = closing_stamp(shapes)
-    feed(grader, 15, WATCHED, through_close(shapes))
-    (verdict,) = grader.release(close + WAIT)
-    assert verdict.side is None and verdict.reason == REASON_NO_SIDE.format(WAIT)
-    (other,) = [v for _, v in feed(FilletGrader(EDGE, watched_lane=WATCHED), 16, 0, shapes)]
-    assert other.reason == "", "a lane the side camera does not watch has no side metrics to miss"
+    (result,) = grader.on_side(partial)
+    assert result.side is partial and math.isnan(result.side.nmdm)
+    assert result.reason == "side view absent: frames lost in the passage"
 
 
 def test_a_window_with_lost_frames_is_unscored_on_the_paper_score_and_has_no_phi_on_the_line_score():
@@ -285,14 +262,14 @@ def test_after_a_reset_the_same_frames_give_the_same_verdicts():
     """Sim time went back (a replay started again): the grader forgets what was in progress and grades anew."""
     grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
     shapes = contours(90)
-    close = closing_stamp(shapes, 5.0)
     runs = []
     for _ in range(2):
-        assert feed(grader, 17, WATCHED, through_close(shapes), t0=5.0) == []
-        runs.append(grader.on_side(side(close - 0.1, close + 0.3, nmdm=0.42)))
-        feed(grader, 18, WATCHED, through_close(shapes), t0=20.0)  # held for its side passage when time goes back
-        assert grader.reset() == (2, 1)  # tracks 17 (not ended yet) and 18, and 18's held verdict
+        verdict = watched_verdict(grader, 17, shapes, t0=5.0)
+        close = verdict.shape.stamp
+        runs.append((verdict, grader.on_side(side(close - 0.1, close + 0.3, nmdm=0.42))))
+        watched_verdict(grader, 18, shapes, t0=20.0)  # waiting for its side passage when time goes back
+        assert grader.reset() == (2, 1)  # tracks 17 (not ended yet) and 18, and 18's side result to come
         assert math.isinf(grader.now) and grader.reset() == (0, 0)
-    first, second = runs
-    assert len(first) == len(second) == 1 and first[0].side.nmdm == second[0].side.nmdm == 0.42
-    assert first[0].shape.phi == second[0].shape.phi and first[0].label == second[0].label
+    (first, (first_side,)), (second, (second_side,)) = runs
+    assert first_side.side.nmdm == second_side.side.nmdm == 0.42
+    assert first.shape.phi == second.shape.phi and first.label == second.label

@@ -72,6 +72,11 @@ def mps_to_fpm(speed_mps: float) -> float:
     return float(speed_mps) / FPM_TO_MPS
 
 
+def watched_lane(lanes: int, side_lane: int = -1) -> int:
+    """The lane the side camera watches: ``side_lane``, or the centre lane when it is -1 (the paper's camera)."""
+    return (lanes - 1) // 2 if side_lane < 0 else side_lane
+
+
 def belt_width_m(lanes: int, lane_pitch_m: float) -> float:
     """Width of a belt carrying ``lanes`` lanes ``lane_pitch_m`` apart."""
     return lanes * float(lane_pitch_m) + 2.0 * BELT_MARGIN_M

@@ -10,7 +10,7 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Collection, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from woody_common.line import mps_to_fpm
@@ -65,7 +65,7 @@ class Spawn:
 
 @dataclass(frozen=True)
 class Verdict:
-    """One /grading/verdicts message, flattened."""
+    """One /grading/verdicts message, flattened, with its /grading/side_metrics when the side camera watched it."""
 
     fillet_id: int
     lane: int
@@ -75,9 +75,9 @@ class Verdict:
     phi: float
     hu_term: float
     solidity_term: float
-    nmdm: float
-    mdm: float
-    be: float
+    nmdm: float = float("nan")
+    mdm: float = float("nan")
+    be: float = float("nan")
     reason: str = ""
     threshold: float = float("nan")
     score: float = float("nan")
@@ -90,20 +90,47 @@ class Verdict:
     rejected_frames: int = 0
 
 
+@dataclass(frozen=True)
+class SideRecord:
+    """One /grading/side_metrics message, flattened: the side view's metrics of one watched-lane fillet."""
+
+    fillet_id: int
+    lane: int
+    nmdm: float
+    mdm: float
+    be: float
+    reason: str = ""
+
+
+def with_side(verdicts: Sequence[Verdict], sides: Iterable[SideRecord]) -> list[Verdict]:
+    """The verdicts with their side metrics, paired by lane and fillet id; a side reason joins the verdict's."""
+    by_fillet = {(s.lane, s.fillet_id): s for s in sides}
+    out = []
+    for verdict in verdicts:
+        side = by_fillet.get((verdict.lane, verdict.fillet_id))
+        if side is not None:
+            reason = "; ".join(r for r in (verdict.reason, side.reason) if r)
+            verdict = replace(verdict, nmdm=side.nmdm, mdm=side.mdm, be=side.be, reason=reason)
+        out.append(verdict)
+    return out
+
+
 def truth_of(k: float, woody_k: float) -> str:
     """Ground-truth class of a fillet from its stiffness."""
     return "woody" if k >= woody_k else "normal"
 
 
 def join(spawns: Sequence[Spawn], verdicts: Sequence[Verdict], woody_k: float = 50.0,
-         gate_commands: Collection[tuple[int, int]] | None = None) -> list[dict]:
+         gate_commands: Collection[tuple[int, int]] | None = None, sides: Iterable[SideRecord] = ()) -> list[dict]:
     """One row per spawned fillet (and per verdict nobody spawned), matched by lane and edge-crossing time.
 
     Per lane, the pairs minimise the total time difference (an assignment, not first come first served): on a
     crowded lane fillets cross the edge less than MATCH_TOLERANCE_S apart, and a fillet without a verdict must
     not take its neighbour's. Scored verdicts are matched first, the unscored ones to the fillets left.
     ``gate_commands`` holds (lane, fillet id) of every GateCommand the run published: a verdict's row says
-    whether the gate acted on it (reject_gate sends none for a verdict that came too late to divert)."""
+    whether the gate acted on it (reject_gate sends none for a verdict that came too late to divert); ``sides``
+    fills in the watched lane's side metrics (:func:`with_side`)."""
+    verdicts = with_side(verdicts, sides)
     pairs: dict[int, int] = {}
     for lane in sorted({s.lane for s in spawns}):
         for scored in (True, False):  # a scored verdict is stamped at the crossing; an unscored one when it gave up

@@ -32,6 +32,7 @@ from woody_common.line import (
     ROLLER_RADIUS_M,
     TOP_CAMERA_HEIGHT_M,
     TOP_EDGE_OFFSET_M,
+    watched_lane,
 )
 
 TOP_CAMERA_PRESETS: dict[str, dict[str, float | int]] = {
@@ -145,7 +146,7 @@ class LineGeometry:
 
     @property
     def watched_lane(self) -> int:
-        return (self.lanes - 1) // 2 if self.side_lane < 0 else self.side_lane
+        return watched_lane(self.lanes, self.side_lane)
 
     @property
     def roller_axle(self) -> tuple[float, float]:

@@ -24,15 +24,16 @@ from woody_bag.errors import BagError
 from woody_bag.recorder_node import recorder_failure
 from woody_bag.summary import bag_summary, losses_text, recorded_losses, recording_text
 from woody_common import topics
-from woody_common.line import fpm_to_mps, spacing_at_rate
+from woody_common.line import fpm_to_mps, spacing_at_rate, watched_lane
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.fillet_pictures import write_fillet_pictures
-from woody_experiments.messages import spawn_from_msg, verdict_from_msg
+from woody_experiments.messages import side_from_msg, spawn_from_msg, verdict_from_msg
 from woody_experiments.run_report import (
     CALIBRATED_SPEEDS,
     MATCH_TOLERANCE_S,
     RECORDING,
     UNSCORED_DIVERTED,
+    SideRecord,
     Spawn,
     Verdict,
     build_report,
@@ -143,7 +144,7 @@ class LineMonitor:
         from rclpy.signals import SignalHandlerOptions
         from sensor_msgs.msg import CameraInfo
 
-        from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand
+        from woody_msgs.msg import FilletSpawn, FilletVerdict, GateCommand, SideMetrics
 
         self.domain_id = domain_id
         self.context = rclpy.Context()
@@ -157,6 +158,7 @@ class LineMonitor:
         reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         self.spawns: list[Spawn] = []
         self.verdicts: list[Verdict] = []
+        self.sides: list[SideRecord] = []
         self.gate_commands: set[tuple[int, int]] = set()
         """(lane, fillet id) of every GateCommand: the fillets the gate acted on in time."""
         self.sim_time = 0.0
@@ -167,6 +169,7 @@ class LineMonitor:
         self.last_frame: tuple[float, float] | None = None
         self.node.create_subscription(FilletSpawn, topics.GROUND_TRUTH, self._on_spawn, latched)
         self.node.create_subscription(FilletVerdict, topics.VERDICTS, self._on_verdict, reliable)
+        self.node.create_subscription(SideMetrics, topics.SIDE_METRICS, self._on_side, reliable)
         self.node.create_subscription(GateCommand, topics.GATE_COMMANDS, self._on_gate, reliable)
         self.node.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self._on_frame, 10)
 
@@ -175,6 +178,9 @@ class LineMonitor:
 
     def _on_verdict(self, msg) -> None:
         self.verdicts.append(verdict_from_msg(msg))
+
+    def _on_side(self, msg) -> None:
+        self.sides.append(side_from_msg(msg))
 
     def _on_gate(self, msg) -> None:
         self.gate_commands.add((msg.lane, msg.fillet_id))
@@ -503,7 +509,7 @@ def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, mon
     """Print the verdict table, write verdicts.csv, report.md and the fillet pictures; the lines woody run adds on
     stderr: messages the recorder lost, and `OUTPUTS_UNWRITTEN` when --out takes no more (a full disk: the table
     printed first is then the record of what was graded)."""
-    rows = join(monitor.spawns, monitor.verdicts, gate_commands=monitor.gate_commands)
+    rows = join(monitor.spawns, monitor.verdicts, gate_commands=monitor.gate_commands, sides=monitor.sides)
     info = dict(run_settings(args, fillets))
     info.update({"fillets spawned": len(monitor.spawns), "verdicts": len(monitor.verdicts),
                  "gate commands": len(monitor.gate_commands), "sim time (s)": f"{monitor.sim_time:.1f}"})
@@ -553,6 +559,9 @@ def _finished(monitor: LineMonitor, fillets: int | None, args: argparse.Namespac
     if not monitor.spawns:
         return False
     last = max(s.expected_crossing for s in monitor.spawns)
-    if len(monitor.verdicts) >= len(monitor.spawns) and monitor.sim_time > last + MATCH_TOLERANCE_S:
-        return True  # not before the last fillet's verdict is due: a track split in two publishes two verdicts
+    watched = watched_lane(args.lanes) if args.side_rate > 0 else None
+    waiting = {v.fillet_id for v in monitor.verdicts if v.lane == watched} - {s.fillet_id for s in monitor.sides}
+    if len(monitor.verdicts) >= len(monitor.spawns) and monitor.sim_time > last + MATCH_TOLERANCE_S and not waiting:
+        return True  # not before the last fillet's verdict is due (a track split in two publishes two verdicts),
+        # nor before the watched lane's side metrics are in
     return monitor.sim_time > last + 4.0

@@ -1,22 +1,23 @@
-"""One verdict per fillet: the top-down shape score plus, for the watched lane, the side-view metrics.
+"""One verdict per fillet from the top-down shape score; for the watched lane, its side-view metrics apart.
 
 Plain module (no rclpy): the grader node feeds it tracks and side frames; the
 experiment runner and the benchmark feed it the same way without ROS.
 
 The top-down window of a fillet closes when its virtual centroid crosses the
-roller edge; the side camera finishes measuring that fillet a little later
-(it is still falling). Verdicts of the watched lane are therefore held until
-the side passage that overlaps them ends, or for at most ``side_wait_s`` of
-sim time, so each fillet still gets exactly one verdict. A verdict released
-without a whole side passage has NMDM, MDM and BE absent and says why, like
-one whose passage lost frames (woody_vision.side_view); Φ over a window with
-lost frames is absent the same way (woody_vision.shape_score). When sim time
-goes back (a replay started again) the node calls :meth:`FilletGrader.reset`.
+roller edge, and its verdict goes out then: the gate downstream needs it in
+time. The side camera finishes measuring that fillet a little later (it is
+still falling), so the watched lane's side metrics are a result of their own
+(:class:`SideResult`), paired with the verdict by fillet id once the side
+passage that overlaps it ends, or after ``side_wait_s`` of sim time without
+one. A side result without a whole side passage has NMDM, MDM and BE absent
+and says why, like one whose passage lost frames (woody_vision.side_view); Φ
+over a window with lost frames is absent the same way
+(woody_vision.shape_score). When sim time goes back (a replay started again)
+the node calls :meth:`FilletGrader.reset`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -35,7 +36,7 @@ from woody_vision.shape_score import (
 from woody_vision.side_view import SideMeasurement
 
 DEFAULT_SIDE_WAIT_S = 0.8
-"""Longest a watched-lane verdict waits for its side-view measurement (sim s)."""
+"""Longest a watched-lane fillet's side result waits for its side passage to end (sim s)."""
 
 REASON_NO_SIDE = "side view absent: no whole side passage of this fillet ended within {:.1f} s of its window"
 
@@ -69,15 +70,12 @@ class GradedFillet:
     """'normal', 'woody' or 'unscored'."""
     grade: str
     """'normal' / 'moderate' / 'severe' when grading, else ''."""
-    side: SideMeasurement | None = None
     score: float = math.nan
     """The score the decision used (``line_phi`` or the paper's Φ, see :class:`FilletGrader`)."""
     conditions: FilletConditions | None = None
     """What the top camera measured of the fillet's speed and direction."""
     threshold: float = math.nan
     """The reject cut's value for this fillet."""
-    side_reason: str = ""
-    """Why a watched-lane verdict carries no side-view metrics ('' when it does, or the lane is not watched)."""
 
     @property
     def scored(self) -> bool:
@@ -86,7 +84,21 @@ class GradedFillet:
     @property
     def reason(self) -> str:
         """Why the fillet is unscored or a metric is absent ('' when every metric it should carry is there)."""
-        return "; ".join(r for r in (self.shape.reason, self.side_reason) if r)
+        return self.shape.reason
+
+
+@dataclass(frozen=True)
+class SideResult:
+    """The side view's measurement of one watched-lane fillet, paired with its verdict by fillet id."""
+
+    fillet_id: int
+    lane: int
+    stamp: float
+    """The stamp of the fillet's verdict (its window's close)."""
+    side: SideMeasurement | None
+    """None when no side passage of the fillet ended within ``side_wait_s``."""
+    reason: str
+    """Why a metric is absent ('' when NMDM, MDM and BE are all measured)."""
 
 
 SCORE_LINE = "line"
@@ -104,15 +116,17 @@ MIN_SIGHTINGS = 3
 """Frames a track must be seen in before its end gives a verdict."""
 
 
-@dataclass
+@dataclass(frozen=True)
 class _Pending:
-    graded: GradedFillet
+    fillet_id: int
+    lane: int
+    stamp: float
     deadline: float
 
 
 @dataclass
 class FilletGrader:
-    """Per-track shape evaluation, classification and side-view pairing."""
+    """Per-track shape evaluation and classification; side-view pairing for the watched lane."""
 
     edge_row: float
     rules: GradingRules = field(default_factory=lambda: calibrated_rules(resolved_calibration()))
@@ -139,8 +153,9 @@ class FilletGrader:
         before a burst of lost frames, noise): no verdict, like a tentative track in SORT-style trackers."""
 
     def reset(self) -> tuple[int, int]:
-        """Forget every fillet (evaluators, held verdicts, side measurements) and the time: sim time went back,
-        and what was in progress belongs to a timeline that is gone. Returns (tracks, held verdicts) dropped."""
+        """Forget every fillet (evaluators, fillets waiting for their side result, side measurements) and the
+        time: sim time went back, and what was in progress belongs to a timeline that is gone. Returns (tracks,
+        side results) dropped."""
         dropped = (len(self._evaluators), len(self._pending))
         self._forget()
         return dropped
@@ -154,7 +169,7 @@ class FilletGrader:
 
     def on_tracks(self, stamp: float, tracks: Sequence[TrackObservation],
                   ended_ids: Iterable[int] = ()) -> list[GradedFillet]:
-        """Feed one top-down frame; returns the verdicts decided now (held watched-lane ones come later)."""
+        """Feed one top-down frame; returns the verdicts decided now (side results come from :meth:`release`)."""
         self.now = max(self.now, stamp)
         decided: list[GradedFillet] = []
         for track in tracks:
@@ -175,7 +190,7 @@ class FilletGrader:
             elif result is not None:
                 decided += self._decide(track_id, result)
             self._lanes.pop(track_id, None)
-        return decided + self.release(self.now)
+        return decided
 
     def frame_phi(self, track_id: int, stamp: float) -> float:
         """Φ_t of the track's frame at ``stamp`` (NaN when that frame was not scored): the overlays' label."""
@@ -183,23 +198,24 @@ class FilletGrader:
         frame = evaluator.last_frame if evaluator is not None else None
         return frame.phi if frame is not None and frame.stamp == stamp else math.nan
 
-    def on_side(self, measurement: SideMeasurement) -> list[GradedFillet]:
-        """Attach a finished side-view passage to the held verdict it overlaps; returns verdicts released."""
+    def on_side(self, measurement: SideMeasurement) -> list[SideResult]:
+        """Pair a finished side-view passage with the fillet it overlaps; returns the side results now known."""
         self._side.append(measurement)
         self._side = [m for m in self._side if m.last_stamp >= self.now - 5.0]
         return self.release(self.now)
 
-    def release(self, now: float) -> list[GradedFillet]:
-        """Held verdicts that found their side measurement or waited long enough."""
+    def release(self, now: float) -> list[SideResult]:
+        """Side results of the watched-lane fillets whose passage ended or that waited long enough."""
         self.now = max(self.now, now)
-        out: list[GradedFillet] = []
+        out: list[SideResult] = []
         keep: list[_Pending] = []
         for pending in self._pending:
-            side = self._match_side(pending.graded)
+            side = self._match_side(pending.stamp)
             if side is not None:
-                out.append(_with_side(pending.graded, side))
+                out.append(SideResult(pending.fillet_id, pending.lane, pending.stamp, side, side.reason))
             elif self.now >= pending.deadline:
-                out.append(dataclasses.replace(pending.graded, side_reason=REASON_NO_SIDE.format(self.side_wait_s)))
+                out.append(SideResult(pending.fillet_id, pending.lane, pending.stamp, None,
+                                      REASON_NO_SIDE.format(self.side_wait_s)))
             else:
                 keep.append(pending)
         self._pending = keep
@@ -211,10 +227,10 @@ class FilletGrader:
             self.fragments += 1
             return []
         graded = self._classify(track_id, lane, result)
-        if self.watched_lane is None or lane != self.watched_lane or not graded.scored:
-            return [graded]
-        self._pending.append(_Pending(graded, deadline=(result.stamp or self.now) + self.side_wait_s))
-        return []
+        if self.watched_lane is not None and lane == self.watched_lane:
+            stamp = self.now if result.stamp is None else result.stamp
+            self._pending.append(_Pending(track_id, lane, stamp, deadline=stamp + self.side_wait_s))
+        return [graded]
 
     def _classify(self, track_id: int, lane: int, result: ShapeResult) -> GradedFillet:
         """The verdict of a finished window: scored and classified, or unscored with its reason."""
@@ -240,13 +256,9 @@ class FilletGrader:
         return any(self._lanes.get(other) == lane and evaluator.referenced
                    for other, evaluator in self._evaluators.items() if other != track_id)
 
-    def _match_side(self, graded: GradedFillet) -> SideMeasurement | None:
-        closing = graded.shape.stamp
+    def _match_side(self, closing: float) -> SideMeasurement | None:
         for i, m in enumerate(self._side):
             if m.first_stamp - SIDE_MATCH_SLACK_S <= closing <= m.last_stamp + SIDE_MATCH_SLACK_S:
                 return self._side.pop(i)
         return None
 
-
-def _with_side(graded: GradedFillet, side: SideMeasurement) -> GradedFillet:
-    return dataclasses.replace(graded, side=side, side_reason=side.reason)

@@ -1,5 +1,10 @@
 """grader: tracks and side-view frames in, one verdict per fillet out (/grading/verdicts).
 
+The watched lane's side-view metrics go out on their own (/grading/side_metrics,
+one per watched-lane fillet, paired by fillet id) when the fillet's side
+passage ends: a verdict never waits for the side camera, so the gate gets it
+as early for the watched lane as for any other.
+
 Thin adapter over woody_vision.grader_core. The roller edge row comes from
 the top camera's calibration (K from camera_info, plus the camera height and
 the edge offset from its optical axis as parameters), never from a pixel
@@ -40,10 +45,11 @@ from woody_common.line import (
     SIDE_ROLLER_RADIUS_PX,
     TOP_CAMERA_HEIGHT_M,
     TOP_EDGE_OFFSET_M,
+    watched_lane,
 )
 from woody_common.ros_params import calibrated_defaults, declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
-from woody_msgs.msg import FilletTrackArray, FilletVerdict
+from woody_msgs.msg import FilletTrackArray, FilletVerdict, SideMetrics
 from woody_vision import side_view
 from woody_vision.camera_model import edge_row
 from woody_vision.frame_checks import FrameChecker, FrameError, SimTimeWatch, watch_clock
@@ -53,6 +59,7 @@ from woody_vision.grader_core import (
     SCORE_PAPER,
     FilletGrader,
     GradedFillet,
+    SideResult,
     TrackObservation,
     check_score,
 )
@@ -84,7 +91,7 @@ EARLY_TRACKS = 900
 """Track messages kept while camera_info has not arrived yet (30 s of a 30 Hz camera)."""
 
 class Grader(Node):
-    """Scores Φ per track, pairs the watched lane with side-view metrics, publishes verdicts."""
+    """Scores Φ per track and publishes verdicts; measures the watched lane's fillets from the side."""
 
     def __init__(self) -> None:
         super().__init__("grader")
@@ -102,32 +109,16 @@ class Grader(Node):
             line_fraction=declare(self, "line_fraction", LINE_OVERHANG_FRACTION, "line_phi is Φ_t where the rigid "
                                   "overhang is this fraction of the body length.", 0.1, 0.9),
         )
-        lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
-        side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1,
-                            MAX_LANES - 1)
-        self.side_enabled = declare(self, "use_side_view", True, "Measure NMDM/MDM/BE on the watched lane.")
-        self.side_wait = declare(self, "side_wait_s", DEFAULT_SIDE_WAIT_S,
-                                 "Longest a watched-lane verdict waits for its side-view measurement (s).", 0.0, 10.0)
-        self.side_options = dict(
-            axle_px=(declare(self, "roller_axle_u", SIDE_AXLE_PX[0], "Roller axle column in the side image (px).",
-                             -1e4, 1e4),
-                     declare(self, "roller_axle_v", SIDE_AXLE_PX[1], "Roller axle row in the side image (px).",
-                             -1e4, 1e4)),
-            roller_radius_px=declare(self, "roller_radius_px", SIDE_ROLLER_RADIUS_PX,
-                                     "Roller radius in the side image (px).", 1.0, 1e4),
-        )
-        if side_lane >= lanes:
-            raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
-        self.watched_lane = (lanes - 1) // 2 if side_lane < 0 else side_lane
+        self.side = self._declare_side_view()
         self.core: FilletGrader | None = None
         self.early_tracks: deque = deque(maxlen=EARLY_TRACKS)
         """Track messages received before the first camera_info, graded as soon as it arrives."""
-        self.side = SidePassageTracker(**self.side_options) if self.side_enabled else None
         side_view.warm_up()  # before any subscription: the first passage is measured whole, never while compiling
         self.side_checker = FrameChecker(self.get_logger())
         self.sim_time = SimTimeWatch()
         self.clock_jumps = watch_clock(self, self.sim_time, self.forget)
         self.published = 0
+        self.side_published = 0
         markers = declare(self, "publish_markers", True, "Publish grading/markers (visualization_msgs/ImageMarker: "
                           "each track's contour on the top image, coloured by its verdict and labelled in ns with id, "
                           "lane and Φ_t; at its verdict the reference outline and the outline at the measuring "
@@ -137,6 +128,7 @@ class Grader(Node):
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         sensor = declare_image_qos(self)
         self.verdict_pub = self.create_publisher(FilletVerdict, topics.VERDICTS, reliable)
+        self.side_pub = self.create_publisher(SideMetrics, topics.SIDE_METRICS, reliable) if self.side else None
         self.marker_pub = self.create_publisher(ImageMarker, "grading/markers", 50) if markers else None
         self.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self.on_camera_info, sensor)
         self.create_subscription(FilletTrackArray, topics.TRACKS, self.on_tracks,
@@ -146,6 +138,29 @@ class Grader(Node):
             self.create_subscription(Image, topics.SIDE_IMAGE, self.on_side_image, side_queue)
         self.create_timer(0.1, self.on_timer)
         self.frame_id = ""
+        self.side_frame_id = ""
+
+    def _declare_side_view(self) -> SidePassageTracker | None:
+        """Declare the lanes and the side view's parameters; its passage tracker (None with the side view off)."""
+        lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
+        side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1,
+                            MAX_LANES - 1)
+        enabled = declare(self, "use_side_view", True, "Measure NMDM/MDM/BE on the watched lane.")
+        self.side_wait = declare(self, "side_wait_s", DEFAULT_SIDE_WAIT_S,
+                                 "Longest a watched-lane fillet's side metrics wait for its side passage to "
+                                 "end (sim s); then they are published absent, with the reason.", 0.0, 10.0)
+        options = dict(
+            axle_px=(declare(self, "roller_axle_u", SIDE_AXLE_PX[0], "Roller axle column in the side image (px).",
+                             -1e4, 1e4),
+                     declare(self, "roller_axle_v", SIDE_AXLE_PX[1], "Roller axle row in the side image (px).",
+                             -1e4, 1e4)),
+            roller_radius_px=declare(self, "roller_radius_px", SIDE_ROLLER_RADIUS_PX,
+                                     "Roller radius in the side image (px).", 1.0, 1e4),
+        )
+        if side_lane >= lanes:
+            raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
+        self.watched_lane = watched_lane(lanes, side_lane)
+        return SidePassageTracker(**options) if enabled else None
 
     def _declare_rules(self) -> GradingRules:
         """Declare ``score``, the paper's threshold and the line's three cuts; the rules the score uses."""
@@ -193,6 +208,7 @@ class Grader(Node):
         tracks = [TrackObservation(t.id, t.lane, np.frombuffer(t.contour_uv, np.int32).reshape(-1, 2), t.unseen)
                   for t in msg.tracks if len(t.contour_uv) >= 6 and len(t.contour_uv) % 2 == 0]
         self._publish(self.core.on_tracks(stamp, tracks, msg.ended_ids))
+        self._publish_side(self.core.release(stamp))
         if self.marker_pub is not None:
             for track in tracks:
                 label = self.labels.get(track.track_id, "pending")
@@ -212,24 +228,25 @@ class Grader(Node):
             return
         if self.side_checker.restarted:  # the size changed
             self.side.reset()
+        self.side_frame_id = msg.header.frame_id
         for measurement in self.side.update(rgb, stamp):
             if self.core is not None:
-                self._publish(self.core.on_side(measurement))
+                self._publish_side(self.core.on_side(measurement))
 
     def forget(self, why: str) -> None:
-        """Sim time went back: drop every fillet in progress (tracks, held verdicts, side passages)."""
+        """Sim time went back: drop every fillet in progress (tracks, side results to come, side passages)."""
         tracks, held = self.core.reset() if self.core is not None else (0, 0)
         if self.side is not None:
             self.side.reset()
             self.side_checker.reset()
         self.labels.clear()
         self.get_logger().warning(f"sim time went back ({why}): forgot {tracks} tracks in progress and {held} "
-                                  "verdicts waiting for the side view; grading starts over")
+                                  "side results to come; grading starts over")
 
     def on_timer(self) -> None:
         now = self.get_clock().now().nanoseconds * 1e-9
         if self.core is not None and self.sim_time.clock_current(now):
-            self._publish(self.core.release(now))
+            self._publish_side(self.core.release(now))
 
     def _publish(self, graded: list[GradedFillet]) -> None:
         for fillet in graded:
@@ -241,6 +258,20 @@ class Grader(Node):
             self.labels[fillet.fillet_id] = fillet.label
             while len(self.labels) > 200:  # only fillets still in view are drawn
                 self.labels.pop(next(iter(self.labels)))
+
+    def _publish_side(self, results: list[SideResult]) -> None:
+        for result in results:
+            self.side_pub.publish(self.side_msg(result))
+            self.side_published += 1
+
+    def side_msg(self, result: SideResult) -> SideMetrics:
+        side, nan = result.side, math.nan
+        msg = SideMetrics(fillet_id=result.fillet_id, lane=max(result.lane, 0), measured=side is not None,
+                          reason=result.reason, nmdm=side.nmdm if side else nan,
+                          mdm=side.mdm_min_px if side else nan, be=side.be if side else nan)
+        msg.header.stamp = seconds_to_stamp(result.stamp)
+        msg.header.frame_id = self.side_frame_id
+        return msg
 
     def _marker(self, header, overlay: Overlay) -> ImageMarker:
         """One outline as an image annotation: ns is its label (woody_vision.overlays), id the track id."""
@@ -256,7 +287,7 @@ class Grader(Node):
         return marker
 
     def to_msg(self, fillet: GradedFillet) -> FilletVerdict:
-        shape, side, nan = fillet.shape, fillet.side, math.nan
+        shape, nan = fillet.shape, math.nan
         conditions = fillet.conditions or FilletConditions(nan)
         msg = FilletVerdict(
             fillet_id=fillet.fillet_id, lane=max(fillet.lane, 0), classification=LABELS[fillet.label],
@@ -269,8 +300,7 @@ class Grader(Node):
             threshold=self.rules.threshold.at(conditions), frames_in_window=shape.frames,
             moderate_threshold=self.rules.grade_moderate_threshold.at(conditions) if self.rules.severe_threshold
             else nan, severe_threshold=self.rules.severe_threshold.at(conditions) if self.rules.severe_threshold
-            else nan, side_measured=side is not None,
-            nmdm=side.nmdm if side else nan, mdm=side.mdm_min_px if side else nan, be=side.be if side else nan)
+            else nan)
         msg.header.stamp = seconds_to_stamp(shape.stamp if shape.stamp is not None else self.core.now)
         msg.header.frame_id = self.frame_id
         if shape.reference_stamp is not None:
@@ -279,8 +309,8 @@ class Grader(Node):
 
     def close(self) -> None:
         pieces = self.core.fragments if self.core is not None else 0
-        print(f"[grader] published {self.published} verdicts; {pieces} tracks were pieces split off a fillet "
-              "past the edge (no verdict)", flush=True)
+        print(f"[grader] published {self.published} verdicts and {self.side_published} side results; {pieces} "
+              "tracks were pieces split off a fillet past the edge (no verdict)", flush=True)
 
 
 def _finite_or_nan(value: float) -> float:

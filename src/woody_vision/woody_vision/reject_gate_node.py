@@ -93,8 +93,8 @@ class RejectGate(Node):
         self.publisher.publish(command)
         self.diverted += 1
         why = verdict.unscored_reason if unscored else f"score {verdict.score:.2f} < {verdict.threshold:.2f}"
-        self.get_logger().info(f"divert fillet {verdict.fillet_id} lane {verdict.lane} at {actuation:.3f} s "
-                               f"({why}); {self.diverted} diverted")
+        self.get_logger().info(f"divert fillet {verdict.fillet_id} lane {verdict.lane} at {actuation:.3f} s, "
+                               f"{actuation - now:.3f} s ahead ({why}); {self.diverted} diverted")
 
 
 def main(args: list[str] | None = None) -> None:
