@@ -70,12 +70,14 @@ LINE_SPEEDS = (90.0, 100.0, 115.0, 130.0, 140.0)
 """The line cuts are fitted over the speeds a line runs at, the paper's two among them."""
 LINE_K = (0.0, 10.0, 20.0, 40.0, 100.0)
 LINE_CONDITIONS = ("tidy", "messy")
+PROGRAM = "woody calibrate"
+"""Prefixes the lines its mesh sets' skipped and converted files are named in."""
 
 
 def _evaluate(runs: list[RunSpec], mesh_spec: str, client, desc: str) -> list[dict]:
     """The runs' rows, evaluated on the Dask cluster exactly like `woody sweep` evaluates its grid."""
     rows: list[dict] = []
-    stats = cluster.run_tasks(client, run_rows, runs, load_meshes(mesh_spec), rows.extend, desc)
+    stats = cluster.run_tasks(client, run_rows, runs, load_meshes(mesh_spec, PROGRAM), rows.extend, desc)
     for line in stats.failed:
         print(f"woody calibrate: not computed: {line}", file=sys.stderr)
     return rows
@@ -208,16 +210,23 @@ def _provenance(args: argparse.Namespace, report: dict) -> dict:
     return out
 
 
+def mesh_specs(args: argparse.Namespace) -> list[str]:
+    """The mesh sets the calibration evaluates (with ``args.loo``: the leave-one-out check's), defaults filled in."""
+    if args.loo:
+        return [args.meshes or LOO_MESHES]
+    return [args.meshes or CALIBRATION_MESHES, args.test_meshes]
+
+
 def calibrate(args: argparse.Namespace, client) -> int:
     """The whole calibration (or, with ``args.loo``, the leave-one-out check) on the Dask ``client``."""
     out = Path(args.out)
     args.calibration = str(resolve_calibration(args.calibration).absolute())  # the workers read the same file
     if args.loo:
-        return run_loo(args.meshes or LOO_MESHES, client, out, args.yaw_sd, args.calibration)
-    args.meshes = args.meshes or CALIBRATION_MESHES
+        return run_loo(mesh_specs(args)[0], client, out, args.yaw_sd, args.calibration)
+    args.meshes = mesh_specs(args)[0]
     try:
-        cal_names = list(load_meshes(args.meshes))
-        test_names = list(load_meshes(args.test_meshes))
+        cal_names = list(load_meshes(args.meshes, PROGRAM))
+        test_names = list(load_meshes(args.test_meshes, PROGRAM))
     except ValueError as exc:  # a malformed spec or a missing path
         print(f"woody calibrate: {exc}", file=sys.stderr)
         return 2
@@ -299,7 +308,7 @@ def _write_md(path: Path, report: dict) -> None:
 def run_loo(spec: str, client, out: Path, yaw_sd: float = 0.0, calibration: str | None = None) -> int:
     """`woody calibrate --loo`: leave-one-mesh-out threshold check on the reference meshes of ``spec``."""
     try:
-        names = [n for n in load_meshes(spec) if evaluation.mesh_set(n) == evaluation.SET_REFERENCE]
+        names = [n for n in load_meshes(spec, PROGRAM) if evaluation.mesh_set(n) == evaluation.SET_REFERENCE]
     except ValueError as exc:
         print(f"woody calibrate: {exc}", file=sys.stderr)
         return 2

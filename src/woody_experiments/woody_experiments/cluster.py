@@ -36,7 +36,7 @@ import dask
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 
 from woody_experiments.experiment import RunSpec
-from woody_sim.meshes import BUILTIN_DIR, FilletMesh, generate_fillet, load_mesh
+from woody_sim.meshes import BUILTIN_DIR, FilletMesh, conversions_noted, generate_fillet, load_mesh
 
 WORKER_WAIT_S = 60.0
 """How long to wait for the first worker of an existing cluster."""
@@ -91,7 +91,8 @@ def load_ref(ref: MeshRef) -> FilletMesh:
     kind, value = ref
     if kind == "generated":
         return generate_fillet(int(value))
-    return load_mesh(BUILTIN_DIR / value if kind == "builtin" else value)
+    with conversions_noted():  # the command that sent the reference said it
+        return load_mesh(BUILTIN_DIR / value if kind == "builtin" else value)
 
 
 def _task(evaluate: Evaluate, run: RunSpec, ref: MeshRef) -> list[dict]:

@@ -6,9 +6,10 @@ is chosen on one set and reported on another.
 
 from __future__ import annotations
 
+import functools
 import sys
 
-from woody_sim.meshes import load_mesh_set
+from woody_sim.meshes import checked_mesh_set
 
 DEFAULT_MESHES = "builtin,generated:24:1"
 """`woody sweep`'s 30 meshes; generated seeds 10000+ are disjoint from the calibration set."""
@@ -22,12 +23,15 @@ LOO_MESHES = "builtin"
 """`woody calibrate --loo` uses the reference (non-generated) meshes of this set."""
 
 
-def load_meshes(spec: str) -> dict:
-    """The meshes of ``spec`` by name (the first of a duplicated name); one stderr line per skipped mesh."""
-    meshes, errors = load_mesh_set(spec)
-    for error in errors:
-        print(f"woody sweep: skipped mesh: {error}", file=sys.stderr)
-    by_name = {}
-    for mesh in meshes:
-        by_name.setdefault(mesh.name, mesh)
-    return by_name
+def load_meshes(spec: str, program: str) -> dict:
+    """The meshes of ``spec`` by name; each file skipped or converted is one stderr line ``<program>: ...``, said
+    once per process however often a step asks for the set; ValueError (one line) when none is usable."""
+    return dict(_loaded(spec, program))
+
+
+@functools.cache
+def _loaded(spec: str, program: str) -> dict:
+    meshes, notes = checked_mesh_set(spec)
+    for note in notes:
+        print(f"{program}: {note}", file=sys.stderr)
+    return {mesh.name: mesh for mesh in meshes}  # a name repeats only for the same source ("builtin,builtin")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import multiprocessing as mp
 
 from woody_sim.line_world import calibrated_config
-from woody_sim.meshes import load_mesh_set
+from woody_sim.meshes import conversions_noted, load_mesh_set
 from woody_sim.soak import soak
 
 DEFAULT_MESHES = "builtin,generated:3:5"
@@ -19,7 +19,8 @@ DEFAULT_MESHES = "builtin,generated:3:5"
 def work(args: tuple[str, int, int, mp.Queue]) -> dict:
     """One worker's share of the passages: (mesh spec, passages, seed, progress queue) -> its summary."""
     spec, passages, seed, queue = args
-    meshes, _ = load_mesh_set(spec)
+    with conversions_noted():  # `woody soak` said them
+        meshes, _ = load_mesh_set(spec)
     return soak(meshes, passages, seed=seed, config=calibrated_config(), progress=queue.put).as_dict()
 
 

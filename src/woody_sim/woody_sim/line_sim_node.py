@@ -70,7 +70,7 @@ from woody_sim.line_conditions import (
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.loop_phases import PhaseClock
-from woody_sim.meshes import MAX_YAW_SD_DEG, MeshError, load_mesh, load_mesh_set
+from woody_sim.meshes import MAX_YAW_SD_DEG, MeshError, checked_mesh_set, load_mesh
 from woody_sim.pacing import LeadLimiter
 from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.sensor_model import sensor_preset, to_message_array
@@ -243,11 +243,9 @@ class LineSim(Node):
         # the child processes start (and import) on the other cores while the meshes load here
         self.renderer = RenderProcess(self.geometry, render_top=True, render_side=self.side_period is not None,
                                       start_method=CHILD_START)
-        meshes, errors = load_mesh_set(p.mesh_spec)
-        for error in errors:
-            self.get_logger().error(error)
-        if not meshes:
-            raise ValueError(f"mesh set '{p.mesh_spec}' has no loadable mesh")
+        meshes, notes = checked_mesh_set(p.mesh_spec)
+        for note in notes:
+            self.get_logger().warning(note)
         self.meshes = {m.name: m for m in meshes}
         for mesh in meshes:  # build every chain model now (~0.2 s each), not in the loop at its first spawn
             self.world.model_for(mesh)

@@ -21,10 +21,13 @@ above), which is what :mod:`woody_sim.fillet_model` slices into segments.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import sys
+import warnings
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -377,10 +380,27 @@ class MeshWarning(UserWarning):
     """A mesh was usable only after a conversion (e.g. millimetres to metres); one line naming the file."""
 
 
+@contextlib.contextmanager
+def conversions_noted() -> Iterator[list[str]]:
+    """Each mesh conversion (MeshWarning) inside becomes a line ``converted mesh <file>: ...`` of the list yielded
+    (filled on leaving), for the program to say with its name, not a Python warning with this file's path and line.
+    Other warnings are given again outside."""
+    notes: list[str] = []
+    caught: list[warnings.WarningMessage] = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", MeshWarning)  # every file converted, not the first per code line
+            yield notes
+    finally:
+        for warning in caught:
+            if issubclass(warning.category, MeshWarning):
+                notes.append(f"converted mesh {warning.message}")
+            else:
+                warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
+
+
 def _to_metres(mesh: trimesh.Trimesh, label: str) -> trimesh.Trimesh:
     """Scale a mesh drawn in cm or mm (the usual scanner unit) to metres, judged from its length."""
-    import warnings
-
     length = float(mesh.extents.max())
     low, high = FILLET_LENGTH_M
     for unit, scale in UNITS:
@@ -803,8 +823,9 @@ def load_mesh_set(spec: str) -> tuple[list[FilletMesh], list[str]]:
     Items: ``builtin`` (the three reference meshes and three generated ones),
     ``generated:N`` / ``generated:N:SEED`` (N fillets with seeds SEED*10000 + i),
     a folder (every .obj/.ply/.stl in it, sorted) or a single mesh file.
-    A malformed spec or a missing path raises ValueError; bad files inside a
-    folder are reported and skipped so one broken scan does not stop a run.
+    A malformed spec, a missing path or two files giving one name (``a.obj`` and
+    ``a.stl``) raises ValueError; bad files inside a folder are reported and
+    skipped so one broken scan does not stop a run.
     """
     fillets: list[FilletMesh] = []
     errors: list[str] = []
@@ -832,4 +853,26 @@ def load_mesh_set(spec: str) -> tuple[list[FilletMesh], list[str]]:
                 fillets.append(load_mesh(path))
             else:
                 raise ValueError(f"mesh spec '{item}': not 'builtin', 'generated:N[:SEED]', a folder or a mesh file")
+    _check_names(fillets)
     return fillets, errors
+
+
+def _check_names(fillets: list[FilletMesh]) -> None:
+    """ValueError when two files give one name (``a.obj`` and ``a.stl``): verdicts and runs are keyed by it."""
+    sources: dict[str, str] = {}
+    for fillet in fillets:
+        first = sources.setdefault(fillet.name, fillet.source)
+        if first != fillet.source:
+            raise ValueError(f"meshes {first} and {fillet.source} share the name '{fillet.name}' (a mesh is named "
+                             "by its file's stem); rename one")
+
+
+def checked_mesh_set(spec: str) -> tuple[list[FilletMesh], list[str]]:
+    """`load_mesh_set` for a program to report: the usable meshes and one line per file skipped (``skipped mesh
+    <file>: <why>``) or converted (``converted mesh <file>: ...``); ValueError, one line naming every file and
+    why, when none is usable."""
+    with conversions_noted() as converted:
+        fillets, errors = load_mesh_set(spec)
+    if not fillets:
+        raise ValueError(f"mesh spec '{spec}': no loadable mesh ({'; '.join(errors)})")
+    return fillets, [f"skipped mesh {error}" for error in errors] + converted

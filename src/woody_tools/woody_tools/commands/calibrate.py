@@ -10,7 +10,7 @@ import argparse
 import sys
 
 from woody_experiments import calibrate, cluster
-from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, TEST_MESHES
+from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, TEST_MESHES, load_meshes
 from woody_tools import arguments
 
 
@@ -43,6 +43,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    try:  # a set without a usable mesh is refused before a cluster starts; the steps find the sets loaded
+        for spec in calibrate.mesh_specs(args):
+            load_meshes(spec, calibrate.PROGRAM)
+    except ValueError as exc:
+        print(f"woody calibrate: {exc}", file=sys.stderr)
+        return 2
     jobs = args.jobs or cluster.default_jobs()
     try:
         with cluster.connect(args.scheduler, jobs, "woody calibrate") as client:

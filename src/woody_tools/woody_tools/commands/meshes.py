@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from woody_sim.mesh_stats import DESCRIPTOR_NAMES, FOOTPRINT_HEIGHT_M, Descriptors, describe, summarize
-from woody_sim.meshes import load_mesh_set
+from woody_sim.meshes import checked_mesh_set
 
 _COLUMNS = {  # descriptor -> (column title, scale, format)
     "aspect_ratio": ("aspect", 1.0, "{:.2f}"),
@@ -54,11 +54,9 @@ def _set_lines(spec: str, meshes: list[Descriptors]) -> list[str]:
 
 
 def _describe_spec(spec: str, threshold: float) -> list[Descriptors]:
-    fillets, errors = load_mesh_set(spec)
-    for error in errors:
-        print(f"woody meshes stats: skipped {error}", file=sys.stderr)
-    if not fillets:
-        raise ValueError(f"mesh spec '{spec}': no usable meshes")
+    fillets, notes = checked_mesh_set(spec)
+    for note in notes:
+        print(f"woody meshes stats: {note}", file=sys.stderr)
     return [describe(fillet, threshold) for fillet in fillets]
 
 

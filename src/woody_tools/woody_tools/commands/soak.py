@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from woody_experiments import soak
-from woody_sim.meshes import load_mesh_set
+from woody_experiments.mesh_sets import load_meshes
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -37,12 +37,10 @@ def run(args: argparse.Namespace) -> int:
         print("woody soak: --passages and --jobs must be >= 1", file=sys.stderr)
         return 2
     try:
-        meshes, errors = load_mesh_set(args.meshes)
+        meshes = load_meshes(args.meshes, "woody soak")
     except ValueError as exc:
         print(f"woody soak: {exc}", file=sys.stderr)
         return 2
-    for error in errors:
-        print(f"woody soak: skipped {error}", file=sys.stderr)
     jobs = min(args.jobs, args.passages)
     share = [args.passages // jobs + (i < args.passages % jobs) for i in range(jobs)]
     t0 = time.perf_counter()

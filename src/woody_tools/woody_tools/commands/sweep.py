@@ -93,18 +93,15 @@ def run(args: argparse.Namespace) -> int:
     if args.speed_change:
         line.update(speed_change_fpm=args.speed_change[0], speed_change_at_s=args.speed_change[1])
         args.speed_change = "{:g}@{:g}".format(*args.speed_change)  # as the folder's settings record it
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     try:
         calibration_path = str(resolve_calibration(args.calibration).absolute())  # workers read the same file
         calibration = resolved_calibration(calibration_path)
-        meshes = load_meshes(args.meshes)
+        meshes = load_meshes(args.meshes, "woody sweep")
     except ValueError as exc:
         print(f"woody sweep: {exc}", file=sys.stderr)
         return 2
-    if not meshes:
-        print("woody sweep: no usable meshes", file=sys.stderr)
-        return 2
+    out = Path(args.out)  # made only once nothing refuses the sweep
+    out.mkdir(parents=True, exist_ok=True)
     mass = float(args.mass) if args.mass is not None else calibration.total_mass_kg
     names = list(meshes)
     csv_path = out / runs_csv.FILE_NAME
