@@ -145,17 +145,18 @@ def test_a_recorder_killed_while_the_nodes_stop_is_one_line_with_the_rescue(tmp_
 
 
 def test_fillets_the_gate_could_not_divert_in_time_count_as_not_diverted(tmp_path):
-    """At 400 FPM a fillet reaches the diverter before its verdict: reject_gate sends no command (it logs the
-    fillet as late). report.md, verdicts.csv and the terminal count those fillets as not diverted. A constant
-    cut above every score sends every scored fillet to the gate (the calibrated cuts do not hold at 400 FPM)."""
+    """A diverter 5 cm past the roller (`--gate-distance 0.05`) must open before the fillet has crossed the edge,
+    so before any verdict can reach it: reject_gate sends no command (it logs each fillet as late). report.md,
+    verdicts.csv and the terminal count those fillets as not diverted. A constant cut above every score sends every
+    scored fillet to the gate."""
     out = tmp_path / "run"
-    run = start_run(out, "--speed-fpm", "400", "--fillets", "6", "--k", "100", "--threshold", "1000")
+    run = start_run(out, "--gate-distance", "0.05", "--fillets", "6", "--k", "100", "--threshold", "1000")
     stdout, stderr = run.communicate(timeout=300)
     assert run.returncode == 0, stderr[-3000:]
     gate = re.search(r"\[reject_gate\] diverted (\d+), late (\d+), passed (\d+)",
                      (out / "logs" / "reject_gate.log").read_text())
     diverted, late = int(gate.group(1)), int(gate.group(2))
-    assert late >= 1, gate.group(0)  # the reproduction: the gate was late at this speed
+    assert late >= 1, gate.group(0)  # the reproduction: the gate was late
     rows = list(csv.DictReader((out / "verdicts.csv").open()))
     assert sum(r["gate_command"] == "none" for r in rows if r["verdict"] != "normal") == late
     assert sum(r["gate_command"] == "sent" for r in rows) == diverted
@@ -166,4 +167,4 @@ def test_fillets_the_gate_could_not_divert_in_time_count_as_not_diverted(tmp_pat
     assert re.search(rf"- line accuracy \(every fillet;[^)]*\): \*\*{diverted / len(rows):.1%}\*\*", report)
     assert "not diverted, no gate command: the verdict came too late to divert it" in report
     assert f"diverted {diverted} of {woody} woody fillets; {late} not diverted (no gate command" in stdout
-    assert "line speed 400 FPM is outside the 90..140 FPM" in stderr
+    assert "| gate distance (m) | 0.05 |" in report

@@ -234,7 +234,7 @@ def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, obj
             "lane pitch (m)": args.lane_pitch_m, "in-lane spacing (m)": spacing,
             "speed change": (f"to {args.speed_change_fpm:g} FPM at {args.speed_change_at:g} s"
                              if args.speed_change_fpm else "none"),
-            UNSCORED_DIVERTED: True, "namespace": args.namespace or "/",
+            UNSCORED_DIVERTED: True, "gate distance (m)": args.gate_distance, "namespace": args.namespace or "/",
             CALIBRATED_SPEEDS: "..".join(f"{v:g}" for v in args.calibrated_speeds) if args.calibrated_speeds
             else "not recorded in the calibration"}
 
@@ -317,7 +317,7 @@ def node_parameters(args: argparse.Namespace, fillets: int | None, out: Path) ->
                           **({} if args.sensor == "ideal" else REAL_CAMERA_FILTERS)),
         "grader": _grader_params(args, vision_params),
         "reject_gate": {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm,
-                        "divert_unscored": True},
+                        "gate_distance_m": [args.gate_distance], "divert_unscored": True},
         "line_sim": _sim_params(args, fillets),
     }
 

@@ -6,6 +6,11 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+GATE_DISTANCE_M = 0.6
+"""Distance from the roller edge to a lane's diverter (m), the reject gate's default."""
+GATE_DISTANCE_RANGE_M = (0.05, 20.0)
+"""Diverter distances a gate accepts (m): from just past the roller to the far end of a long take-away belt."""
+
 
 @dataclass(frozen=True)
 class GateTiming:
@@ -18,8 +23,9 @@ class GateTiming:
     def __post_init__(self) -> None:
         if self.line_speed_mps <= 0:
             raise ValueError(f"line speed must be > 0 m/s, got {self.line_speed_mps}")
-        if not self.gate_distances_m or any(d <= 0 for d in self.gate_distances_m):
-            raise ValueError(f"gate distances must be > 0 m, got {list(self.gate_distances_m)}")
+        low, high = GATE_DISTANCE_RANGE_M
+        if not self.gate_distances_m or not all(low <= d <= high for d in self.gate_distances_m):
+            raise ValueError(f"gate distances must be in [{low:g}, {high:g}] m, got {list(self.gate_distances_m)}")
         if self.open_duration_s <= 0:
             raise ValueError(f"open duration must be > 0 s, got {self.open_duration_s}")
 

@@ -28,7 +28,7 @@ from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletVerdict, GateCommand
 from woody_vision.frame_checks import SimTimeWatch, watch_clock
-from woody_vision.gate_timing import GateTiming
+from woody_vision.gate_timing import GATE_DISTANCE_M, GateTiming
 
 
 class RejectGate(Node):
@@ -39,8 +39,8 @@ class RejectGate(Node):
         speed_fpm = declare(self, "line_speed_fpm", REFERENCE_SPEED_FPM, "Belt speed in feet per minute (100 "
                             "and 130 are the commercial speeds).", *SPEED_RANGE_FPM)
         lanes = declare(self, "lanes", LANES, "Number of lanes, each with its own diverter.", 1, MAX_LANES)
-        distances = list(declare(self, "gate_distance_m", [0.6], "Distance from the roller edge to each lane's "
-                                 "diverter (m): one value for all lanes or one per lane."))
+        distances = list(declare(self, "gate_distance_m", [GATE_DISTANCE_M], "Distance from the roller edge to each "
+                                 "lane's diverter (m): one value for all lanes or one per lane."))
         open_duration = declare(self, "open_duration_s", 0.3, "How long a diverter stays open (s).", 0.01, 5.0)
         self.divert_unscored = declare(self, "divert_unscored", True, "Also divert fillets that could not be "
                                        "scored (fail safe: one that could not be measured may be woody).")

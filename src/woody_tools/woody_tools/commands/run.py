@@ -37,6 +37,7 @@ from woody_sim.sensor_model import PRESETS
 from woody_tools import arguments, line_run
 from woody_tools.line_run import RunInterrupted, RunRefused, describe_conditions
 from woody_tools.processes import STOP
+from woody_vision.gate_timing import GATE_DISTANCE_M, GATE_DISTANCE_RANGE_M
 from woody_vision.grader_core import SCORES
 from woody_vision.grading import THRESHOLD_RANGE
 
@@ -136,6 +137,10 @@ def _add_grading_arguments(parser: argparse.ArgumentParser) -> None:
     grading.add_argument("--threshold", type=float, default=None, metavar="X",
                          help="a constant reject cut on the score in use (line: line_threshold [X, 0, 0, 0, 0]; paper: "
                               "threshold X); default the calibrated cuts of --calibration")
+    grading.add_argument("--gate-distance", type=float, default=GATE_DISTANCE_M, metavar="M",
+                         help="distance from the roller edge to every lane's diverter, m (reject_gate's "
+                              f"gate_distance_m; default {GATE_DISTANCE_M:g}): how long a verdict has to reach the "
+                              "gate")
 
 
 def _validate(args: argparse.Namespace) -> None:
@@ -254,6 +259,9 @@ def _validate_grading(args: argparse.Namespace) -> None:
     low, high = THRESHOLD_RANGE
     if args.threshold is not None and not low <= args.threshold <= high:
         raise RunRefused(f"--threshold must be in [{low:g}, {high:g}], got {args.threshold:g}")
+    low, high = GATE_DISTANCE_RANGE_M
+    if not low <= args.gate_distance <= high:
+        raise RunRefused(f"--gate-distance must be in [{low:g}, {high:g}] m, got {args.gate_distance:g}")
 
 
 def checked(args: argparse.Namespace) -> argparse.Namespace:
