@@ -4,6 +4,7 @@ Replaying it into the vision nodes reproduces its verdicts."""
 
 from __future__ import annotations
 
+import csv
 import math
 import re
 import subprocess
@@ -226,6 +227,8 @@ def test_report_rebuilds_from_the_sample_bag(tmp_path):
     assert "accuracy" in report and (tmp_path / "phi_by_k_lane.png").stat().st_size > 1000
     rows = (tmp_path / "verdicts.csv").read_text().splitlines()
     assert len(rows) == 4 and rows[0].startswith("fillet_id,lane,mesh,k,speed_fpm,phi")
+    (watched,) = [row for row in csv.DictReader(rows) if row["lane"] == "1"]
+    assert 0.2 < float(watched["nmdm"]) < 1.5, "the side metrics joined to their verdict"
 
 
 def test_bad_inputs_give_one_line_errors(tmp_path):
@@ -236,6 +239,10 @@ def test_bad_inputs_give_one_line_errors(tmp_path):
         result = subprocess.run([entry_point("woody"), *args], capture_output=True, text=True, timeout=60)
         assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1, (args, result.stderr)
         assert "Traceback" not in result.stderr
-    result = subprocess.run([sys.executable, "-m", "woody_tools.cli", "report", str(truncated), "--out", str(tmp_path)],
-                            capture_output=True, text=True, timeout=60)
-    assert "Traceback" not in result.stderr and "cut.mcap" in result.stderr + result.stdout
+    result = subprocess.run([sys.executable, "-m", "woody_tools.cli", "report", str(truncated), "--out",
+                             str(tmp_path / "report")], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0 and "Traceback" not in result.stderr, result.stderr
+    assert "cut.mcap: truncated after" in result.stderr and "reporting its readable part" in result.stderr
+    assert "- the bag ends early:" in (tmp_path / "report" / "report.md").read_text()
+    rows = list(csv.DictReader((tmp_path / "report" / "verdicts.csv").open()))
+    assert len(rows) == 3, "the fillets spawned in the readable part"
