@@ -1,8 +1,18 @@
-"""The recorder's losses record (`woody_bag.summary`): written from per-topic counts, read back, said in one phrase."""
+"""`woody_bag.summary`: the recorder's losses record (written from per-topic counts, read back, said in one
+phrase) and what a bag holds."""
 
 from __future__ import annotations
 
-from woody_bag.summary import LOSSES_RECORD, bag_summary, losses_record, losses_text, recorded_losses
+from woody_bag.reader import read_bag
+from woody_bag.summary import (
+    LOSSES_RECORD,
+    bag_summary,
+    losses_record,
+    losses_text,
+    recorded_losses,
+    recording_text,
+    unmeasured_text,
+)
 from woody_bag.writer import BagWriter
 
 DROPS = {"/clock": (2292, 2305), "/side_camera/image_raw": (247, 250), "/grading/verdicts": (12, 12),
@@ -18,6 +28,18 @@ def test_losses_travel_through_the_bag_metadata(tmp_path):
     assert recorded_losses(metadata) == {"/clock": 13, "/side_camera/image_raw": 3}
     assert losses_text(recorded_losses(metadata)) == (
         "16 messages lost (/clock 13, /side_camera/image_raw 3)")
+    assert unmeasured_text(metadata) == ("; losses not measured on /tf (their publishers give no usable sequence "
+                                         "numbers)")
+    assert recording_text(bag_summary(tmp_path / "x.mcap")).startswith("0 messages, 16 messages lost (/clock 13")
+
+
+def test_a_recording_closed_before_any_message_is_complete(tmp_path):
+    with BagWriter(tmp_path / "empty.mcap") as writer:
+        writer.add_metadata(LOSSES_RECORD, losses_record({}))
+    summary = bag_summary(tmp_path / "empty.mcap")
+    assert summary["complete"] and summary["message_count"] == 0 and summary["error"] is None
+    assert recording_text(summary) == "0 messages, no message lost"
+    assert list(read_bag(tmp_path / "empty.mcap")) == []
 
 
 def test_no_loss_and_no_record_are_told_apart():

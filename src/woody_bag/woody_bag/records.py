@@ -60,7 +60,8 @@ def is_complete(handle: io.BufferedReader) -> bool:
 
 
 def read_summary(path: Path, handle: io.BufferedReader):
-    """The summary of a complete file with chunk indexes, else None."""
+    """The summary of a complete file: with chunk indexes, or with statistics of no message (a recording that
+    ended before anything arrived), else None."""
     if not is_complete(handle):
         return None
     try:
@@ -68,9 +69,10 @@ def read_summary(path: Path, handle: io.BufferedReader):
         summary = SeekingReader(handle).get_summary()
     except Exception:  # noqa: BLE001 - a damaged footer means: read it as a stream
         return None
-    if summary is None or not summary.chunk_indexes:
+    if summary is None:
         return None
-    return summary
+    empty = summary.statistics is not None and summary.statistics.message_count == 0
+    return summary if summary.chunk_indexes or empty else None
 
 
 def stream_records(handle: io.BufferedReader) -> Iterator[Any]:

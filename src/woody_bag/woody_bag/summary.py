@@ -123,9 +123,18 @@ def recorded_losses(metadata: dict[str, dict[str, str]]) -> dict[str, int] | Non
     return {topic: int(n) for topic, n in record.items() if topic.startswith("/")}
 
 
+def unmeasured_text(metadata: dict[str, dict[str, str]]) -> str:
+    """"" or "; losses not measured on /a, /b (...)": the topics whose losses the recorder could not count."""
+    topics = [t for t in metadata.get(LOSSES_RECORD, {}).get("unmeasured", "").split(",") if t]
+    if not topics:
+        return ""
+    return f"; losses not measured on {', '.join(topics)} (their publishers give no usable sequence numbers)"
+
+
 def recording_text(summary: dict[str, Any]) -> str:
     """A `bag_summary` in one phrase for the terminal and report.md: "5133 messages, no message lost"."""
-    return f"{summary['message_count']} messages, {losses_text(recorded_losses(summary['metadata']))}"
+    metadata = summary["metadata"]
+    return f"{summary['message_count']} messages, {losses_text(recorded_losses(metadata))}{unmeasured_text(metadata)}"
 
 
 def losses_text(losses: dict[str, int] | None) -> str:
