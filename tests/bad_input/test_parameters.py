@@ -61,6 +61,8 @@ NODE_REFUSALS = {  # command: what its one line says
     ros_args("reject_gate", "line_speed_fpm:=1000"): "Parameter line_speed_fpm out of range Min: 1.0, Max: 400.0",
     **{ros_args(node, "lanes:=7"): "Parameter lanes out of range. Min: 1, Max: 6"
        for node in ("line_sim", "segmenter", "grader", "reject_gate")},
+    **{ros_args(node, f"lane_pitch_m:={pitch}"): "Parameter lane_pitch_m out of range Min: 0.08, Max: 1.04"
+       for node in ("line_sim", "segmenter") for pitch in (0.05, 1.5)},
     ros_args("line_sim", "k_values:=[-1.0]"): "k_values must be a non-empty list of finite values >= 0, got [-1.0]",
     ros_args("segmenter", "min_area_px:=0"): "Parameter min_area_px out of range. Min: 1, Max: 100000",
     ros_args("grader", "threshold:=-1.0"): "Parameter threshold out of range Min: 0.001, Max: 1000.0",

@@ -41,6 +41,8 @@ BELT_MARGIN_M = 0.08
 MAX_BELT_WIDTH_M = 1.2
 """Widest belt (lanes x pitch + both margins) accepted: a wide processing-line belt, within the default top
 camera's 1.37 m view across the belt."""
+LANE_PITCH_RANGE_M = (MIN_LANE_PITCH_M, MAX_BELT_WIDTH_M - 2.0 * BELT_MARGIN_M)
+"""The lane_pitch_m line_sim and the segmenter accept: closest lanes to one lane on the widest belt."""
 
 MIN_SPAWN_SPACING_M = 0.15
 """Closest in-lane spacing (belt distance between consecutive fillets' spawns) line_sim accepts: the shortest

@@ -35,6 +35,7 @@ from woody_common.line import (
     BELT_MARGIN_M,
     CLASS_K,
     LANE_PITCH_M,
+    LANE_PITCH_RANGE_M,
     LANES,
     MAX_BELT_WIDTH_M,
     MAX_FILLETS,
@@ -43,7 +44,6 @@ from woody_common.line import (
     MAX_SIDE_RATE_HZ,
     MAX_SPAWN_DURATION_S,
     MAX_SPAWN_SPACING_M,
-    MIN_LANE_PITCH_M,
     MIN_SPAWN_SPACING_M,
     REFERENCE_SPEED_FPM,
     SPEED_RANGE_FPM,
@@ -207,7 +207,7 @@ class LineSim(Node):
         pitch = check_lane_pitch(lanes, declare(
             self, "lane_pitch_m", LANE_PITCH_M, "Distance between lane centres across the belt (m); the belt is "
             f"lanes x pitch + {2 * BELT_MARGIN_M:g} m wide, at most {MAX_BELT_WIDTH_M:g} m. The segmenter needs "
-            "the same value.", MIN_LANE_PITCH_M, MAX_BELT_WIDTH_M - 2 * BELT_MARGIN_M))
+            "the same value.", *LANE_PITCH_RANGE_M))
         if self.conditions.lateral_max_m > pitch / 2 + 1e-12:
             raise ValueError(f"lateral_max_m {self.conditions.lateral_max_m:g} m would move fillets out of their "
                              f"lane: at most half the lane pitch, {pitch / 2:g} m")

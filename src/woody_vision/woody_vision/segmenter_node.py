@@ -28,7 +28,14 @@ from std_msgs.msg import Empty
 
 from woody_common import topics
 from woody_common.images import image_message
-from woody_common.line import LANE_PITCH_M, LANES, MAX_FILLET_WIDTH_M, MAX_LANES, TOP_CAMERA_HEIGHT_M
+from woody_common.line import (
+    LANE_PITCH_M,
+    LANE_PITCH_RANGE_M,
+    LANES,
+    MAX_FILLET_WIDTH_M,
+    MAX_LANES,
+    TOP_CAMERA_HEIGHT_M,
+)
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import stamp_to_seconds
 from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
@@ -64,7 +71,8 @@ class Segmenter(Node):
                                     "depth mask (px).", 0, 100),
         )
         self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
-        self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Distance between lane centres (m).", 0.01, 2.0)
+        self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Distance between lane centres (m).",
+                                  *LANE_PITCH_RANGE_M)
         self.max_fillet_width = declare(self, "max_fillet_width_m", MAX_FILLET_WIDTH_M, "A blob wider across the "
                                         "flow than this is checked for two fillets side by side (m; 0 = off).",
                                         0.0, 2.0)
