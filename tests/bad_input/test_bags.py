@@ -21,6 +21,7 @@ import pytest
 from conftest import REPO, spin_until
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from bad_input.conftest import assert_one_clear_line
 from woody_bag.summary import LOSSES_RECORD, bag_summary, losses_text, recorded_losses
 from woody_tools.line_run import LOST_NOTE
 from woody_tools.processes import NodeProcess, entry_point, wait_for
@@ -233,3 +234,48 @@ def test_replaying_twice_and_faster_into_live_nodes_gives_one_verdict_per_fillet
     first, second = ([(v.lane, v.classification, v.header.stamp.sec, v.header.stamp.nanosec) for v in verdicts]
                      for verdicts, _ in passes[:2])
     assert sorted(first) == sorted(second), logs
+
+
+TRACKS = "/vision/tracks"
+REPLAY = ("--topics", TRACKS, "--no-clock", "--wait-for-subscribers", "0", "--discovery", "0", "--quiet")
+
+
+def bag_recorded_with(path: Path, edit, monkeypatch) -> Path:
+    """Five /vision/tracks messages in a bag whose recorded FilletTrackArray definition is ``edit`` of this
+    workspace's (as a bag written before the .msg file changed holds it)."""
+    from fixtures.known_messages import known
+    from rclpy.serialization import serialize_message
+
+    from woody_bag import writer
+
+    current = writer.message_definition
+    with monkeypatch.context() as patched:
+        patched.setattr(writer, "message_definition", lambda type_name: edit(current(type_name)))
+        with writer.BagWriter(path) as bag:
+            bag.add_topic(TRACKS, "woody_msgs/msg/FilletTrackArray")
+            for i in range(5):
+                bag.write(TRACKS, serialize_message(known(TRACKS, i)), 1_700_000_000 * 10**9 + i * 10**8)
+    return path
+
+
+def test_a_definition_changed_in_its_comments_replays_and_one_changed_in_a_field_is_one_line(
+        entry, tmp_path, monkeypatch):
+    """Comments and spacing are not the type: such a topic plays as it is. A field of another type cannot be
+    decoded by this workspace's woody_msgs: refused with one line saying why."""
+    def commented(text: str) -> str:
+        return "# written before a comment was added\n" + text.replace(
+            "uint32 image_width            # px", "uint32   image_width # pixels across the frame")
+
+    def retyped(text: str) -> str:
+        return text.replace("uint32 image_width", "uint16 image_width")
+
+    from woody_bag.schemas import message_definition
+
+    assert "uint32 image_width            # px" in message_definition("woody_msgs/msg/FilletTrackArray")
+    played = entry("woody", "replay", str(bag_recorded_with(tmp_path / "commented.mcap", commented, monkeypatch)),
+                   *REPLAY, timeout=60)
+    assert played.code == 0 and played.lines == [], played.lines
+    old = bag_recorded_with(tmp_path / "retyped.mcap", retyped, monkeypatch)
+    refused = entry("woody", "replay", str(old), *REPLAY, timeout=60)
+    assert_one_clear_line(refused, "replay", f"{old}: nothing playable in the selected topics (skipping {TRACKS}: "
+                                             "recorded with an older woody_msgs/msg/FilletTrackArray definition")

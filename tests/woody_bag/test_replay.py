@@ -249,8 +249,8 @@ def test_a_topic_recorded_with_an_older_woody_msgs_definition_is_skipped_with_on
     replay.add_arguments(parser)
     assert replay.run(parser.parse_args([str(bag), "--topics", TRACKS, "--no-clock"])) == 2
     err = capsys.readouterr().err.splitlines()
-    assert err[0].startswith(f"replay: skipping {TRACKS}: recorded with an older woody_msgs/msg/FilletTrackArray")
-    assert err[1:] == [f"replay: {bag}: nothing playable in the selected topics"]
+    assert len(err) == 1 and err[0].startswith(f"replay: {bag}: nothing playable in the selected topics (skipping "
+                                               f"{TRACKS}: recorded with an older woody_msgs/msg/FilletTrackArray")
 
 
 def test_every_publisher_the_clock_included_waits_for_its_last_messages_to_be_acknowledged(

@@ -31,6 +31,7 @@ The options and exit codes are `woody_tools.commands.replay`'s. Behaviour:
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import threading
 import time
@@ -73,23 +74,42 @@ def qos_for(qos_yaml: str):
 
 
 def outdated(topic_info: dict) -> bool:
-    """A woody_msgs topic whose recorded definition differs from the current one cannot be decoded by it."""
+    """A woody_msgs topic whose recorded fields differ from the current ones cannot be decoded by them (a comment
+    or spacing changed since the recording does not matter)."""
     type_name = topic_info["type"]
     if not type_name.startswith("woody_msgs/") or not topic_info.get("definition"):
         return False
-    return topic_info["definition"] != message_definition(type_name)
+    return definition_fields(topic_info["definition"]) != definition_fields(message_definition(type_name))
 
 
-def playable_types(args: argparse.Namespace, path, in_bag: dict[str, dict]) -> dict[str, type]:
-    """Topic -> message class of the selected topics this workspace can publish (a line on stderr per skipped one);
-    ValueError when the bag holds none of the requested topics."""
+def definition_fields(definition: str) -> list[str]:
+    """The lines of a ``ros2msg`` definition that make the type (fields, constants, the nested types' headers),
+    without comments, blank lines and spacing (``X = 1`` is ``X=1``); a ``#`` inside a quoted constant is kept."""
+    lines = []
+    for line in definition.splitlines():
+        quote = None
+        for i, char in enumerate(line):
+            if char in "\"'" and quote in (None, char):
+                quote = None if quote else char
+            elif char == "#" and quote is None:
+                line = line[:i]
+                break
+        if line.strip():
+            lines.append(re.sub(r" ?= ?", "=", " ".join(line.split())))
+    return lines
+
+
+def playable_types(args: argparse.Namespace, path, in_bag: dict[str, dict]) -> tuple[dict[str, type], list[str]]:
+    """Topic -> message class of the selected topics this workspace can publish, and why each other one is skipped
+    (``skipping /topic: ...``); ValueError when the bag holds none of the requested topics."""
     requested = None if not args.topics else [t if t.startswith("/") else "/" + t for t in args.topics]
+    skipped = []
     if requested is not None:
         missing = [t for t in requested if t not in in_bag]
         if len(missing) == len(requested):
             raise ValueError(f"{path}: holds none of {' '.join(requested)} (it has {' '.join(sorted(in_bag))})")
         if missing:
-            print(f"replay: {path}: not in the bag, skipped: {' '.join(missing)}", file=sys.stderr)
+            skipped.append(f"{path}: not in the bag, skipped: {' '.join(missing)}")
     excluded = {t if t.startswith("/") else "/" + t for t in args.exclude}
     selected = [t for t in (requested or sorted(in_bag)) if t in in_bag and t != CLOCK and t not in excluded]
     types: dict[str, type] = {}
@@ -97,13 +117,13 @@ def playable_types(args: argparse.Namespace, path, in_bag: dict[str, dict]) -> d
         try:
             types[topic] = message_class(in_bag[topic]["type"])
         except LookupError as exc:
-            print(f"replay: skipping {topic}: {exc}", file=sys.stderr)
+            skipped.append(f"skipping {topic}: {exc}")
             continue
         if outdated(in_bag[topic]):
             del types[topic]
-            print(f"replay: skipping {topic}: recorded with an older {in_bag[topic]['type']} definition than this "
-                  "workspace's woody_msgs (replay the camera topics into the vision nodes instead)", file=sys.stderr)
-    return types
+            skipped.append(f"skipping {topic}: recorded with an older {in_bag[topic]['type']} definition than this "
+                           "workspace's woody_msgs (replay the camera topics into the vision nodes instead)")
+    return types, skipped
 
 
 def live_publishers(node, topics, namespace: str) -> dict[str, list[str]]:

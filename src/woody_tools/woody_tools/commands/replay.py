@@ -74,12 +74,15 @@ def run(args: argparse.Namespace) -> int:
         return _fail(info["error"] or f"{path}: the bag holds no messages")
 
     try:
-        types = playable_types(args, path, in_bag)
+        types, skipped = playable_types(args, path, in_bag)
     except ValueError as exc:
         return _fail(str(exc))
     clock_mode = None if args.no_clock else ("recorded" if CLOCK in in_bag else "synthesised")
     if not types and clock_mode != "recorded":
-        return _fail(f"{path}: nothing playable in the selected topics")
+        why = f" ({'; '.join(skipped)})" if skipped else ""
+        return _fail(f"{path}: nothing playable in the selected topics{why}")
+    for line in skipped:
+        print(f"replay: {line}", file=sys.stderr)
 
     try:
         import rclpy
