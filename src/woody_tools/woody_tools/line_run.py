@@ -24,6 +24,7 @@ from woody_bag.errors import BagError
 from woody_bag.recorder_node import recorder_failure
 from woody_bag.summary import bag_summary, losses_text, recorded_losses, recording_text
 from woody_common import topics
+from woody_common.dds_shm import remove_stale
 from woody_common.line import fpm_to_mps, spacing_at_rate, watched_lane
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.fillet_pictures import write_fillet_pictures
@@ -427,6 +428,8 @@ def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, monitor:
     """Start the nodes, watch the line, stop the nodes however the run ends; write what was graded, or set a run
     that graded nothing aside; the exit code."""
     print(f"woody run: ROS_DOMAIN_ID={monitor.domain_id}, output {out}/", flush=True)
+    for line in _shm_notes():
+        print(f"woody run: {line}", flush=True)
     nodes: list[NodeProcess] = []
     cpu = reason = None
     try:
@@ -548,6 +551,13 @@ def recording_summary(bag: Path) -> tuple[str, str | None]:
         return str(exc), None
     losses = recorded_losses(summary["metadata"])
     return recording_text(summary), losses_text(losses) if losses else None
+
+
+def _shm_notes() -> list[str]:
+    """Remove the Fast DDS shared memory that killed processes left (woody_common.dds_shm); a line saying so."""
+    removed, freed = remove_stale()
+    return [f"removed {removed} Fast DDS shared-memory files ({freed / 1e6:.0f} MB) left by processes that were "
+            "killed"] if removed else []
 
 
 def _finished(monitor: LineMonitor, fillets: int | None, args: argparse.Namespace) -> bool:
