@@ -71,8 +71,7 @@ class Segmenter(Node):
                                     "depth mask (px).", 0, 100),
         )
         self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
-        self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Distance between lane centres (m).",
-                                  *LANE_PITCH_RANGE_M)
+        self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Lane centre to centre (m).", *LANE_PITCH_RANGE_M)
         self.max_fillet_width = declare(self, "max_fillet_width_m", MAX_FILLET_WIDTH_M, "A blob wider across the "
                                         "flow than this is checked for two fillets side by side (m; 0 = off).",
                                         0.0, 2.0)
