@@ -1,5 +1,5 @@
 """`woody report` never overwrites its input; a failed `woody run` can be retried as typed; a line speed outside
-the calibrated ones is said at the start and in report.md."""
+the calibrated ones is said at the start and in report.md; `woody sweep --out` naming a file is one line."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from conftest import REPO
 
+from bad_input.conftest import assert_one_clear_line, run_entry
 from woody_tools.processes import entry_point
 
 pytestmark = pytest.mark.ros
@@ -104,3 +105,11 @@ def test_a_speed_outside_the_calibrated_ones_is_warned_about_at_the_start_and_in
     assert f"- {warning}" in report and "| calibrated line speeds (FPM) | 90..140 |" in report
     again = woody("report", str(out / "line.mcap"), timeout=120)  # the bag carries it too
     assert again.returncode == 0 and f"- {warning}" in (out / "line-report" / "report.md").read_text()
+
+
+def test_a_sweep_out_that_is_a_file_is_one_line_and_leaves_the_file(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine\n")
+    for out, why in (("notes.txt", "File exists"), ("notes.txt/sweep", "Not a directory")):
+        outcome = run_entry("woody", "sweep", "--meshes", "generated:1", "--out", out, domain=None, cwd=tmp_path)
+        assert_one_clear_line(outcome, "woody sweep", f"--out {out}: cannot make the folder ({why})")
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"] and (tmp_path / "notes.txt").read_text() == "mine\n"

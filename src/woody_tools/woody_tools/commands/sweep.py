@@ -101,7 +101,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"woody sweep: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)  # made only once nothing refuses the sweep
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file of that name, a read-only place
+        print(f"woody sweep: --out {out}: cannot make the folder ({exc.strerror})", file=sys.stderr)
+        return 2
     mass = float(args.mass) if args.mass is not None else calibration.total_mass_kg
     names = list(meshes)
     csv_path = out / runs_csv.FILE_NAME
