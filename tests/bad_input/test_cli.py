@@ -1,5 +1,6 @@
 """`woody report` never overwrites its input; a failed `woody run` can be retried as typed; a line speed outside
-the calibrated ones is said at the start and in report.md; `woody sweep --out` naming a file is one line."""
+the calibrated ones is said at the start and in report.md; `woody sweep --out` and `woody calibrate --out` naming a
+file are one line."""
 
 from __future__ import annotations
 
@@ -112,4 +113,12 @@ def test_a_sweep_out_that_is_a_file_is_one_line_and_leaves_the_file(tmp_path):
     for out, why in (("notes.txt", "File exists"), ("notes.txt/sweep", "Not a directory")):
         outcome = run_entry("woody", "sweep", "--meshes", "generated:1", "--out", out, domain=None, cwd=tmp_path)
         assert_one_clear_line(outcome, "woody sweep", f"--out {out}: cannot make the folder ({why})")
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"] and (tmp_path / "notes.txt").read_text() == "mine\n"
+
+
+def test_a_calibrate_out_that_is_a_file_is_one_line_before_any_work(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine\n")
+    for out in ("notes.txt", "notes.txt/cal"):
+        outcome = run_entry("woody", "calibrate", "--skip-physics", "--out", out, domain=None, cwd=tmp_path)
+        assert_one_clear_line(outcome, "woody calibrate", f"--out {out}: notes.txt is not a folder")
     assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"] and (tmp_path / "notes.txt").read_text() == "mine\n"

@@ -175,7 +175,7 @@ def test_nothing_usable_is_refused_with_one_line_and_leaves_nothing(meshes):
         ("woody", "meshes", "stats", "generated:0"): "mesh spec 'generated:0': N must be >= 1",
         ("woody", "meshes", "stats", str(bad)): none_usable,
         ("woody", "meshes", "stats", str(meshes / "same")): same,
-        ("woody", "run", "--meshes", str(bad), "--out", "run"): f"--meshes {bad}: no loadable mesh ({bad}/",
+        ("woody", "run", "--meshes", str(bad), "--out", "run"): f"--meshes: {none_usable}",
         ("woody", "run", "--meshes", str(meshes / "nothere"), "--out", "run"): f"mesh spec '{meshes / 'nothere'}'",
         ("woody", "run", "--meshes", str(meshes / "same"), "--out", "run"): f"--meshes: {same}",
         ("woody", "sweep", "--meshes", str(bad), "--out", "sweep"): none_usable,

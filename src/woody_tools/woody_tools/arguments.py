@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Callable
+from pathlib import Path
 
 from woody_common.line import MAX_SPAWN_DURATION_S, SPEED_RANGE_FPM
 from woody_experiments.conditions import SWEEP_CONDITIONS
@@ -87,3 +89,14 @@ def _speed_change_type(text: str) -> tuple[float, float]:
 
 SPEED_CHANGE = _speed_change_type
 """An argparse type for ``--speed-change FPM@SECONDS``."""
+
+
+def out_folder_problem(out: Path) -> str | None:
+    """Why ``out`` cannot become a folder (a file in its place or on its path, a folder it may not write in),
+    else None; nothing is created, so a command can refuse before it starts its work."""
+    for path in (out, *out.parents):
+        if path.exists():
+            if not path.is_dir():
+                return f"{path} is not a folder"
+            return None if os.access(path, os.W_OK) else f"{path} is not writable"
+    return None

@@ -103,20 +103,12 @@ def _claim_out(out: Path, force: bool):
 def _check_meshes(spec: str) -> tuple[list, list[str]]:
     """The loadable meshes of ``spec``, and one line per mesh file that line_sim would skip or convert, checked
     here so the terminal and report.md name them (line_sim only logs them)."""
-    import warnings
+    from woody_sim.meshes import checked_mesh_set
 
-    from woody_sim.meshes import MeshWarning, load_mesh_set
-
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            meshes, errors = load_mesh_set(spec)
-        except ValueError as exc:
-            raise RunRefused(f"--meshes: {exc}") from None
-    if not meshes:
-        raise RunRefused(f"--meshes {spec}: no loadable mesh ({'; '.join(errors)})")
-    converted = [f"converted mesh {w.message}" for w in caught if issubclass(w.category, MeshWarning)]
-    return meshes, [f"skipped mesh {line}" for line in errors] + converted
+    try:
+        return checked_mesh_set(spec)
+    except ValueError as exc:
+        raise RunRefused(f"--meshes: {exc}") from None
 
 
 def _crowding_notes(meshes: list, args: argparse.Namespace) -> list[str]:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from woody_experiments import calibrate, cluster
 from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, TEST_MESHES, load_meshes
@@ -43,6 +44,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    problem = arguments.out_folder_problem(Path(args.out))
+    if problem:
+        print(f"woody calibrate: --out {args.out}: {problem}", file=sys.stderr)
+        return 2
     try:  # a set without a usable mesh is refused before a cluster starts; the steps find the sets loaded
         for spec in calibrate.mesh_specs(args):
             load_meshes(spec, calibrate.PROGRAM)
