@@ -23,7 +23,9 @@ from woody_experiments.mesh_sets import load_meshes
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--passages", type=int, default=5000, help="fillet passages to run (default 5000)")
+    parser.add_argument("--passages", type=int, default=5000,
+                        help="fillet passages to run at least (whole batches of several fillets each, so a worker may "
+                             "run a few more; default 5000)")
     parser.add_argument("--meshes", default=soak.DEFAULT_MESHES, help=f"mesh set (default {soak.DEFAULT_MESHES})")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: cores)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the condition order (default 0)")
