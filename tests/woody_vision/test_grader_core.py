@@ -10,6 +10,7 @@ import pytest
 from woody_vision.grader_core import (
     REASON_NO_SIDE,
     SIDE_MATCH_SLACK_S,
+    SIDE_SILENT_S,
     FilletGrader,
     GradedFillet,
     SideResult,
@@ -159,10 +160,28 @@ def test_watched_lane_verdict_goes_out_at_once_and_its_side_result_when_the_pass
 def test_side_result_after_side_wait_without_a_measurement_says_why():
     grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
     close = watched_verdict(grader, 6, contours(90)).shape.stamp
-    assert grader.release(close + WAIT - 0.01) == []
-    (result,) = grader.release(close + WAIT)
+    assert grader.side_seen(close + WAIT - 0.01) == []
+    (result,) = grader.side_seen(close + WAIT)
     assert result.fillet_id == 6 and result.side is None and result.reason == REASON_NO_SIDE.format(WAIT)
-    assert grader.release(close + 2 * WAIT) == []
+    assert grader.side_seen(close + 2 * WAIT) == [] and grader.release(close + 10 * WAIT) == []
+
+
+def test_a_grader_behind_on_its_side_frames_waits_for_them():
+    """The top camera's clock past the side wait says nothing of side frames still queued: their passage counts."""
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    close = watched_verdict(grader, 13, contours(90)).shape.stamp
+    assert grader.release(close + WAIT + SIDE_SILENT_S - 0.01) == []
+    (result,) = grader.on_side(side(close - 0.1, close + 0.3, nmdm=0.42))
+    assert result.fillet_id == 13 and result.side.nmdm == 0.42 and result.reason == ""
+
+
+def test_a_silent_side_camera_ends_the_wait_on_the_top_cameras_clock():
+    grader = FilletGrader(EDGE, watched_lane=WATCHED, side_wait_s=WAIT)
+    close = watched_verdict(grader, 14, contours(90)).shape.stamp
+    grader.side_seen(close - 1.0)  # its last frame came before the window closed
+    assert grader.release(close + WAIT + SIDE_SILENT_S - 0.01) == []
+    (result,) = grader.release(close + WAIT + SIDE_SILENT_S)
+    assert result.fillet_id == 14 and result.side is None and result.reason == REASON_NO_SIDE.format(WAIT)
 
 
 def test_side_measurement_that_arrived_first_is_paired_at_the_next_release():
@@ -181,7 +200,7 @@ def test_side_measurement_of_another_time_is_not_attached():
     close = watched_verdict(grader, 10, contours(90), t0=t0).shape.stamp
     assert grader.on_side(side(close - 3.0, close - 2.0)) == []
     assert grader.on_side(side(close + SIDE_MATCH_SLACK_S + 0.05, close + 0.6)) == []
-    (result,) = grader.release(close + WAIT)
+    (result,) = grader.side_seen(close + WAIT)
     assert result.side is None
 
 

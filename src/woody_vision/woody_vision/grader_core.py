@@ -8,8 +8,10 @@ roller edge, and its verdict goes out then: the gate downstream needs it in
 time. The side camera finishes measuring that fillet a little later (it is
 still falling), so the watched lane's side metrics are a result of their own
 (:class:`SideResult`), paired with the verdict by fillet id once the side
-passage that overlaps it ends, or after ``side_wait_s`` of sim time without
-one. A side result without a whole side passage has NMDM, MDM and BE absent
+passage that overlaps it ends, or after ``side_wait_s`` of the side camera's
+time without one (:meth:`FilletGrader.side_seen`): a grader behind on its
+queued side frames never calls absent a passage it has yet to read. A side
+result without a whole side passage has NMDM, MDM and BE absent
 and says why, like one whose passage lost frames (woody_vision.side_view); Φ
 over a window with lost frames is absent the same way
 (woody_vision.shape_score). When sim time goes back (a replay started again)
@@ -37,6 +39,10 @@ from woody_vision.side_view import SideMeasurement
 
 DEFAULT_SIDE_WAIT_S = 0.8
 """Longest a watched-lane fillet's side result waits for its side passage to end (sim s)."""
+
+SIDE_SILENT_S = 2.0
+"""A side camera that sent nothing this long (sim s) past a fillet's side wait is taken as gone: its side result goes
+out absent by the top camera's clock instead (a line without a side camera, a bag replayed without its frames)."""
 
 REASON_NO_SIDE = "side view absent: no whole side passage of this fillet ended within {:.1f} s of its window"
 
@@ -166,6 +172,8 @@ class FilletGrader:
         self._pending: list[_Pending] = []
         self._side: list[SideMeasurement] = []
         self.now = -math.inf
+        self.side_now = -math.inf
+        """The stamp of the newest side frame the side view has read."""
 
     def on_tracks(self, stamp: float, tracks: Sequence[TrackObservation],
                   ended_ids: Iterable[int] = ()) -> list[GradedFillet]:
@@ -204,8 +212,14 @@ class FilletGrader:
         self._side = [m for m in self._side if m.last_stamp >= self.now - 5.0]
         return self.release(self.now)
 
+    def side_seen(self, stamp: float) -> list[SideResult]:
+        """The side view has read every side frame up to ``stamp``: the side results now known."""
+        self.side_now = max(self.side_now, stamp)
+        return self.release(self.now)
+
     def release(self, now: float) -> list[SideResult]:
-        """Side results of the watched-lane fillets whose passage ended or that waited long enough."""
+        """Side results of the watched-lane fillets whose passage ended or that waited long enough (``side_wait_s``
+        on the side camera's clock, or SIDE_SILENT_S more on the top camera's ``now``)."""
         self.now = max(self.now, now)
         out: list[SideResult] = []
         keep: list[_Pending] = []
@@ -213,7 +227,7 @@ class FilletGrader:
             side = self._match_side(pending.stamp)
             if side is not None:
                 out.append(SideResult(pending.fillet_id, pending.lane, pending.stamp, side, side.reason))
-            elif self.now >= pending.deadline:
+            elif self.side_now >= pending.deadline or self.now >= pending.deadline + SIDE_SILENT_S:
                 out.append(SideResult(pending.fillet_id, pending.lane, pending.stamp, None,
                                       REASON_NO_SIDE.format(self.side_wait_s)))
             else:

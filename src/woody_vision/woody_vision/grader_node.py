@@ -148,7 +148,8 @@ class Grader(Node):
         enabled = declare(self, "use_side_view", True, "Measure NMDM/MDM/BE on the watched lane.")
         self.side_wait = declare(self, "side_wait_s", DEFAULT_SIDE_WAIT_S,
                                  "Longest a watched-lane fillet's side metrics wait for its side passage to "
-                                 "end (sim s); then they are published absent, with the reason.", 0.0, 10.0)
+                                 "end (sim s, by the side frames' stamps); then they are published absent, with the "
+                                 "reason.", 0.0, 10.0)
         options = dict(
             axle_px=(declare(self, "roller_axle_u", SIDE_AXLE_PX[0], "Roller axle column in the side image (px).",
                              -1e4, 1e4),
@@ -229,9 +230,11 @@ class Grader(Node):
         if self.side_checker.restarted:  # the size changed
             self.side.reset()
         self.side_frame_id = msg.header.frame_id
-        for measurement in self.side.update(rgb, stamp):
-            if self.core is not None:
+        measurements = self.side.update(rgb, stamp)
+        if self.core is not None:
+            for measurement in measurements:
                 self._publish_side(self.core.on_side(measurement))
+            self._publish_side(self.core.side_seen(stamp))
 
     def forget(self, why: str) -> None:
         """Sim time went back: drop every fillet in progress (tracks, side results to come, side passages)."""
