@@ -132,15 +132,16 @@ def test_the_design_load_beside_two_busy_processes_loses_nothing(tmp_path):
 
 
 def test_a_line_faster_than_its_recorder_waits_for_it_and_loses_nothing(tmp_path):
-    """woody run's line runs as fast as its consumers take it: a recorder stopped for 1.5 s (a disk that stalls)
-    holds the line (line_sim waits on recorder/recorded_clock) instead of losing what it publishes meanwhile."""
+    """woody run's line runs as fast as its consumers take it: a recorder stopped for 3 s (a disk that stalls)
+    holds the line (line_sim waits on recorder/recorded_clock) instead of losing what it publishes meanwhile, and
+    shared memory keeps what is sent to it (a stall shorter than healthy_check_timeout_ms, config/fastdds.xml)."""
     run = start_run(tmp_path, "--fillets", "9")
     recorder = recorder_pid(tmp_path / "run")
     log = tmp_path / "run" / "logs" / "recorder.log"
     assert wait_for(lambda: log.exists() and "recording /top_camera/depth/image_raw" in log.read_text(), 60.0)
     time.sleep(1.0)
     os.kill(recorder, signal.SIGSTOP)
-    time.sleep(1.5)
+    time.sleep(3.0)
     os.kill(recorder, signal.SIGCONT)
     code, out, err = finish(run, tmp_path, timeout=300)
     assert code == 0, out + err
@@ -151,20 +152,23 @@ def test_a_line_faster_than_its_recorder_waits_for_it_and_loses_nothing(tmp_path
 
 def test_messages_lost_by_a_starved_recorder_are_counted_per_topic_where_the_user_looks(
         ros_domain, spawn_helper, tmp_path):
-    """Beyond the design load: the recorder gets no CPU for 8 s (SIGSTOP) while a publisher sends 2000 images/s
-    beside the line, more than the 8192 messages shared memory holds for it (config/fastdds.xml). Its losses per
+    """Beyond the design load: the recorder gets no CPU (SIGSTOP) while a publisher beside the line bursts 12,000
+    images at it, more than the 8192 messages shared memory queues for it (config/fastdds.xml). Its losses per
     topic are on the terminal, in report.md and in the bag's metadata."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(ros_domain))
     run = start_run(tmp_path, "--fillets", "6", "--share-domain", env=env)
     out_dir = tmp_path / "run"
     pid = recorder_pid(out_dir)
-    spawn_helper("image_blaster", "--count", "30000", "--rate", "2000", "--width", "32", "--height", "32")
-    log = out_dir / "logs" / "recorder.log"
+    blaster = spawn_helper("image_blaster", "--count", "12000", "--on-signal", "--width", "32", "--height", "32")
+    log, blaster_log = out_dir / "logs" / "recorder.log", tmp_path / "image_blaster.log"
     assert wait_for(lambda: "recording /blast/image_raw" in log.read_text(), 60), log.read_text()
-    time.sleep(1.5)
+    assert wait_for(lambda: "matched" in blaster_log.read_text(), 60), blaster_log.read_text()
     os.kill(pid, signal.SIGSTOP)
-    time.sleep(8.0)
-    os.kill(pid, signal.SIGCONT)
+    try:
+        blaster.send_signal(signal.SIGUSR1)
+        assert wait_for(lambda: "published" in blaster_log.read_text(), 8.0), blaster_log.read_text()
+    finally:
+        os.kill(pid, signal.SIGCONT)
     code, out, err = finish(run, tmp_path, timeout=400)
     assert code == 0 and "Traceback" not in out + err, out + err
 

@@ -123,18 +123,30 @@ def recorded_losses(metadata: dict[str, dict[str, str]]) -> dict[str, int] | Non
     return {topic: int(n) for topic, n in record.items() if topic.startswith("/")}
 
 
-def unmeasured_text(metadata: dict[str, dict[str, str]]) -> str:
-    """"" or "; losses not measured on /a, /b (...)": the topics whose losses the recorder could not count."""
-    topics = [t for t in metadata.get(LOSSES_RECORD, {}).get("unmeasured", "").split(",") if t]
-    if not topics:
-        return ""
-    return f"; losses not measured on {', '.join(topics)} (their publishers give no usable sequence numbers)"
+def _unmeasured(summary: dict[str, Any]) -> list[str]:
+    return [t for t in summary["metadata"].get(LOSSES_RECORD, {}).get("unmeasured", "").split(",") if t]
+
+
+def unrecorded_topics(summary: dict[str, Any]) -> list[str]:
+    """The topics of a `bag_summary` the recorder subscribed to (a publisher was there) and received no message on: a
+    recorder cut off from its publishers counts no loss there, so this is said instead."""
+    return [t for t in _unmeasured(summary) if not summary["topics"].get(t, {}).get("count")]
+
+
+def unmeasured_text(summary: dict[str, Any]) -> str:
+    """"", "; nothing recorded on /a" and/or "; losses not measured on /b, /c (...)": the topics of a `bag_summary`
+    whose losses the recorder could not count."""
+    empty = unrecorded_topics(summary)
+    shared = [t for t in _unmeasured(summary) if t not in empty]
+    return ((f"; nothing recorded on {', '.join(empty)}" if empty else "")
+            + (f"; losses not measured on {', '.join(shared)} (their publishers give no usable sequence numbers)"
+               if shared else ""))
 
 
 def recording_text(summary: dict[str, Any]) -> str:
     """A `bag_summary` in one phrase for the terminal and report.md: "5133 messages, no message lost"."""
-    metadata = summary["metadata"]
-    return f"{summary['message_count']} messages, {losses_text(recorded_losses(metadata))}{unmeasured_text(metadata)}"
+    losses = losses_text(recorded_losses(summary["metadata"]))
+    return f"{summary['message_count']} messages, {losses}{unmeasured_text(summary)}"
 
 
 def losses_text(losses: dict[str, int] | None) -> str:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from woody_bag.errors import BagError
 from woody_bag.recorder_node import recorder_failure
-from woody_bag.summary import bag_summary, losses_text, recorded_losses, recording_text
+from woody_bag.summary import bag_summary, losses_text, recorded_losses, recording_text, unrecorded_topics
 from woody_common import topics
 from woody_common.dds_shm import remove_stale
 from woody_common.line import fpm_to_mps, spacing_at_rate, watched_lane
@@ -536,13 +536,18 @@ def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, mon
 
 def recording_summary(bag: Path) -> tuple[str, str | None]:
     """What the bag holds, for the terminal and report.md ("5133 messages, no message lost"), and what the recorder
-    lost per topic (None when nothing was lost or the bag does not say)."""
+    lost per topic, or every topic it received nothing on when that includes the line's /clock, published all run
+    long (None when nothing was lost or the bag does not say)."""
     try:
         summary = bag_summary(bag)
     except BagError as exc:
         return str(exc), None
     losses = recorded_losses(summary["metadata"])
-    return recording_text(summary), losses_text(losses) if losses else None
+    unrecorded = unrecorded_topics(summary)
+    missed = [losses_text(losses)] if losses else []
+    if "/clock" in unrecorded:
+        missed.append(f"nothing recorded on {', '.join(unrecorded)}")
+    return recording_text(summary), "; ".join(missed) or None
 
 
 def _shm_notes() -> list[str]:

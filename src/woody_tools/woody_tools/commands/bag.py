@@ -25,7 +25,7 @@ def info_lines(summary: dict) -> list[str]:
     state = "complete" if summary["complete"] else "NOT FINALISED (no summary; read as a stream)"
     lines = [f"bag: {summary['path']} ({state})",
              f"messages: {summary['message_count']} over {summary['duration_s']:.3f} s, "
-             + losses_text(recorded_losses(summary["metadata"])) + unmeasured_text(summary["metadata"])]
+             + losses_text(recorded_losses(summary["metadata"])) + unmeasured_text(summary)]
     if summary["error"]:
         lines.append(f"ends: {summary['error']}; `woody bag recover` rewrites the readable part")
     width = max((len(t) for t in summary["topics"]), default=0)
