@@ -117,6 +117,9 @@ def _check_docs(out, docs):
 def _check_traces(out, rows, keys):
     # --traces: every scored lane's window frame by frame, and one plot per mesh and speed
     trace_rows = traces.join(out)
+    runs = {(m, k) for m, k, _, _ in keys}
+    assert sorted((out / traces.TRACE_DIR / "runs").glob("*.csv")) == sorted(
+        traces.run_file(out, m, k, 100.0, float(rows[0]["mass"])) for m, k in runs)
     assert {(r["mesh"], r["k"], int(r["lane"])) for r in trace_rows} == {(m, k, lane) for m, k, _, lane in keys}
     for r in rows:
         window = [t for t in trace_rows if t["mesh"] == r["mesh"] and t["k"] == float(r["k"])

@@ -15,10 +15,10 @@ def lane_row(mesh: str, k: float, lane: int, frames: int) -> dict:
 
 def test_run_files_join_and_plot(tmp_path):
     for k in (0.0, 100.0):
-        path = traces.write_run(tmp_path, [lane_row("seed0002", k, lane, 4 + lane) for lane in range(3)])
-        assert path == traces.run_file(tmp_path, "seed0002", k, 100.0, 20.0) and path.exists()
+        paths = traces.write_runs(tmp_path, [lane_row("seed0002", k, lane, 4 + lane) for lane in range(3)])
+        assert paths == [traces.run_file(tmp_path, "seed0002", k, 100.0, 20.0)] and paths[0].exists()
     # a run whose lanes have no scored frame still gets its (header-only) file: the run is traced
-    empty = traces.write_run(tmp_path, [{**lane_row("generated-0001", 0.0, 0, 0), "trace": []}])
+    [empty] = traces.write_runs(tmp_path, [{**lane_row("generated-0001", 0.0, 0, 0), "trace": []}])
     with empty.open() as fh:
         assert list(csv.reader(fh)) == [traces.COLUMNS]
     assert not list((tmp_path / traces.TRACE_DIR / "runs").glob("*.tmp"))
@@ -34,3 +34,13 @@ def test_run_files_join_and_plot(tmp_path):
     plots = traces.plot(tmp_path, rows, 100.0, 100.0, threshold=6.0)
     assert plots == [tmp_path / traces.TRACE_DIR / "seed0002_100fpm.png"]
     assert plots[0].stat().st_size > 5000
+
+
+def test_a_batch_of_runs_that_finished_together_gets_one_file_per_run(tmp_path):
+    batch = [lane_row(mesh, k, lane, 3) for mesh in ("seed0002", "seed0005") for k in (0.0, 100.0) for lane in range(3)]
+    paths = traces.write_runs(tmp_path, batch)
+    assert paths == [traces.run_file(tmp_path, mesh, k, 100.0, 20.0) for mesh in ("seed0002", "seed0005")
+                     for k in (0.0, 100.0)]
+    for path in paths:
+        with path.open(newline="") as fh:
+            assert len({(r["mesh"], r["k"]) for r in csv.DictReader(fh)}) == 1

@@ -30,11 +30,20 @@ def run_file(out: Path, mesh: str, k: float, speed: float, mass: float, conditio
     return Path(out) / TRACE_DIR / "runs" / f"{mesh}_k{k:g}_{speed:g}fpm_M{mass:g}{suffix}.csv"
 
 
-def write_run(out: Path, rows: Sequence[dict]) -> Path:
-    """Write the traces of one run's lane rows (they share mesh, k, speed, mass); returns the file."""
-    first = rows[0]
-    path = run_file(out, first["mesh"], float(first["k"]), float(first["speed_fpm"]),
-                    float(first["mass"]) / float(first.get("scale") or 1.0) ** 3, first.get("condition") or TIDY)
+def write_runs(out: Path, rows: Sequence[dict]) -> list[Path]:
+    """Write the traces of a batch of lane rows, one file per run (a batch may hold several runs that finished
+    together); returns the files written."""
+    by_file: dict[Path, list[dict]] = {}
+    for row in rows:
+        path = run_file(out, row["mesh"], float(row["k"]), float(row["speed_fpm"]),
+                        float(row["mass"]) / float(row.get("scale") or 1.0) ** 3, row.get("condition") or TIDY)
+        by_file.setdefault(path, []).append(row)
+    for path, run_rows in by_file.items():
+        _write(path, run_rows)
+    return list(by_file)
+
+
+def _write(path: Path, rows: Sequence[dict]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     with tmp.open("w", newline="") as fh:
@@ -48,7 +57,6 @@ def write_run(out: Path, rows: Sequence[dict]) -> Path:
         fh.flush()
         os.fsync(fh.fileno())
     tmp.replace(path)
-    return path
 
 
 def join(out: Path) -> list[dict]:

@@ -169,7 +169,7 @@ def _evaluate_todo(args: argparse.Namespace, todo: list[RunSpec], meshes: dict,
     def save(rows: list[dict]) -> None:
         runs_file.append(rows)
         if args.traces:
-            traces.write_run(Path(args.out), rows)
+            traces.write_runs(Path(args.out), rows)
 
     try:
         with cluster.connect(args.scheduler, min(args.jobs, len(todo)), "woody sweep") as client:
