@@ -69,6 +69,8 @@ def test_info_names_where_a_cut_bag_ends(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "NOT FINALISED" in result.stdout and "truncated after" in result.stdout and "/clock" in result.stdout
     assert "run_settings" in result.stdout
+    # the same phrase as the terminal and report.md: a cut bag never wrote its losses record
+    assert result.stdout.splitlines()[1].endswith("messages, losses not recorded")
 
 
 @pytest.mark.parametrize("make,args,message", [

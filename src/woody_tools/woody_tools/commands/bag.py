@@ -7,7 +7,7 @@ import sys
 
 from woody_bag.errors import BagError
 from woody_bag.recovery import recover_bag
-from woody_bag.summary import bag_summary, losses_text, recorded_losses, unmeasured_text
+from woody_bag.summary import bag_summary, recording_text
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,8 +24,7 @@ def info_lines(summary: dict) -> list[str]:
     """The lines `woody bag info` prints for a `bag_summary`."""
     state = "complete" if summary["complete"] else "NOT FINALISED (no summary; read as a stream)"
     lines = [f"bag: {summary['path']} ({state})",
-             f"messages: {summary['message_count']} over {summary['duration_s']:.3f} s, "
-             + losses_text(recorded_losses(summary["metadata"])) + unmeasured_text(summary)]
+             f"recorded: {summary['duration_s']:.3f} s, {recording_text(summary)}"]
     if summary["error"]:
         lines.append(f"ends: {summary['error']}; `woody bag recover` rewrites the readable part")
     width = max((len(t) for t in summary["topics"]), default=0)
