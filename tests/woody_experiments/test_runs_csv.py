@@ -50,4 +50,18 @@ def test_runs_file_replaces_atomically(tmp_path, monkeypatch):
     assert path.read_text() == before  # the previous batch's file, whole
     monkeypatch.undo()
     done, _ = sweep.completed_runs(path, lanes=2)
-    assert done == {sweep.run_key("m", 0.0, 100.0, 20.0)}
+    assert done == {runs_csv.run_key("m", 0.0, 100.0, 20.0)}
+
+
+def test_a_row_is_keyed_by_its_run_as_evaluated_and_as_read_back(tmp_path):
+    scaled = {"mesh": "m", "k": 40.0, "speed_fpm": 130.0, "condition": "messy", "lane": 0, "mass": 20.0 * 1.1 ** 3,
+              "scale": 1.1}
+    key = runs_csv.run_key("m", 40.0, 130.0, 20.0, "messy")
+    assert runs_csv.row_key(scaled) == key
+    RunsFile(tmp_path / FILE_NAME, [scaled])
+    assert runs_csv.row_key(read_runs(tmp_path / FILE_NAME)[0]) == key  # six significant digits, same run
+    # an error row carries no scale and an older file no condition: an unscaled, tidy run
+    assert runs_csv.row_key({"mesh": "m", "k": 0.0, "speed_fpm": 100.0, "mass": 20.0}) == runs_csv.run_key(
+        "m", 0.0, 100.0, 20.0)
+    assert runs_csv.row_key({"mesh": "m", "k": 0.0, "speed_fpm": 100.0, "mass": 20.0, "scale": math.nan,
+                             "condition": ""}) == runs_csv.run_key("m", 0.0, 100.0, 20.0)

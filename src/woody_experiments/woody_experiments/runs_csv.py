@@ -15,6 +15,8 @@ import math
 import os
 from pathlib import Path
 
+from woody_experiments.conditions import TIDY
+
 FILE_NAME = "runs.csv"
 
 RUN_COLUMNS = ["mesh", "k", "speed_fpm", "condition", "lane", "mass", "yaw_deg", "blunt_first", "scale", "phi",
@@ -27,6 +29,19 @@ FLOAT_COLUMNS = ("k", "speed_fpm", "mass", "yaw_deg", "blunt_first", "scale", "p
 """Numbers; an empty (or unreadable) cell reads as NaN."""
 INT_COLUMNS = ("lane",)
 STRING_COLUMNS = tuple(c for c in RUN_COLUMNS if c not in FLOAT_COLUMNS and c not in INT_COLUMNS)
+
+
+def run_key(mesh: str, k: float, speed: float, mass: float, condition: str = TIDY) -> tuple:
+    """A run's identity in ``runs.csv``: mesh, k, speed, the chain mass before any size scaling, condition."""
+    return (mesh, round(float(k), 6), round(float(speed), 6), round(float(mass), 3), condition)
+
+
+def row_key(row: dict) -> tuple:
+    """The `run_key` of the run a lane row (as evaluated, or read back) belongs to: its mass is the scaled chain's
+    (M·s³), so it is divided by the size scale, and a row without a scale or condition is of an unscaled, tidy run."""
+    scale = float(row.get("scale") or math.nan)
+    mass = float(row["mass"]) / (scale ** 3 if math.isfinite(scale) else 1.0)
+    return run_key(row["mesh"], row["k"], row["speed_fpm"], mass, row.get("condition") or TIDY)
 
 
 def read_runs(path: Path) -> list[dict]:

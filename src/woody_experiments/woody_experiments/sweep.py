@@ -19,7 +19,7 @@ from pathlib import Path
 from woody_common.line import PAPER_SPEEDS_FPM
 from woody_experiments.conditions import TIDY
 from woody_experiments.experiment import RunSpec, evaluate_run
-from woody_experiments.runs_csv import FILE_NAME, RunsFile, read_runs
+from woody_experiments.runs_csv import FILE_NAME, RunsFile, read_runs, row_key
 from woody_experiments.traces import run_file
 from woody_sim.meshes import mesh_yaw
 
@@ -33,21 +33,13 @@ META_FILE = "sweep_meta.json"
 CSV_FILE = FILE_NAME
 
 
-def run_key(mesh: str, k: float, speed: float, mass: float, condition: str = TIDY) -> tuple:
-    """A run's identity in ``runs.csv``: mesh, k, speed, the chain mass before any size scaling, condition."""
-    return (mesh, round(float(k), 6), round(float(speed), 6), round(float(mass), 3), condition)
-
-
 def completed_runs(path: Path, lanes: int, traced: Path | None = None) -> tuple[set[tuple], RunsFile]:
     """Keys of runs with all their lane rows in the CSV (and, with ``traced`` = the sweep folder, their trace
     file), and the file to append to without the other runs' rows (they are redone cleanly)."""
     by_run: dict[tuple, list[dict]] = {}
     for row in read_runs(path):
-        scale = row["scale"] if math.isfinite(row["scale"]) else 1.0
-        if not all(math.isfinite(row[c]) for c in ("mass", "k", "speed_fpm")):
-            continue
-        key = run_key(row["mesh"], row["k"], row["speed_fpm"], row["mass"] / scale ** 3, row["condition"] or TIDY)
-        by_run.setdefault(key, []).append(row)
+        if all(math.isfinite(row[c]) for c in ("mass", "k", "speed_fpm")):
+            by_run.setdefault(row_key(row), []).append(row)
     done = {key for key, rs in by_run.items() if {r["lane"] for r in rs} >= set(range(lanes))}
     if traced is not None:
         done = {key for key in done if run_file(traced, *key).exists()}

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from woody_experiments.conditions import TIDY
+from woody_experiments.runs_csv import row_key
 
 TRACE_DIR = "traces"
 TRACE_CSV = "traces.csv"
@@ -35,9 +36,7 @@ def write_runs(out: Path, rows: Sequence[dict]) -> list[Path]:
     together); returns the files written."""
     by_file: dict[Path, list[dict]] = {}
     for row in rows:
-        path = run_file(out, row["mesh"], float(row["k"]), float(row["speed_fpm"]),
-                        float(row["mass"]) / float(row.get("scale") or 1.0) ** 3, row.get("condition") or TIDY)
-        by_file.setdefault(path, []).append(row)
+        by_file.setdefault(run_file(out, *row_key(row)), []).append(row)
     for path, run_rows in by_file.items():
         _write(path, run_rows)
     return list(by_file)

@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     runs = sweep.plan(names, args.k, args.speeds, args.lanes, mass, side=not args.no_side, top_camera=args.top_camera,
                       sensor=args.sensor, yaw_sd=args.yaw_sd, conditions=tuple(args.conditions),
                       calibration=calibration_path, line=line)
-    todo = [r for r in runs if sweep.run_key(r.mesh, r.k, r.speed_fpm, mass, r.condition) not in done]
+    todo = [r for r in runs if runs_csv.run_key(r.mesh, r.k, r.speed_fpm, mass, r.condition) not in done]
     where = args.scheduler or f"a local Dask cluster of {min(args.jobs, max(1, len(todo)))} workers"
     print(f"woody sweep: {len(names)} meshes x {len(args.k)} k x {len(args.speeds)} speeds x "
           f"{len(args.conditions)} conditions = {len(runs)} runs "
