@@ -16,7 +16,7 @@ from woody_common.calibration import (
     write_calibration,
 )
 
-GRADER = ("threshold", "line_threshold", "moderate_threshold", "severe_threshold")
+GRADER = ("threshold", "line_threshold", "moderate_threshold", "severe_threshold", "fitted_range")
 
 
 @pytest.fixture
@@ -63,7 +63,7 @@ def test_write_then_read_round_trips_and_follows_a_link(tmp_path, no_env):
 def test_node_defaults_read_no_file_when_the_params_file_gives_them(tmp_path, monkeypatch):
     monkeypatch.setenv(ENV_VAR, str(tmp_path / "absent.yaml"))  # any read would raise
     given = {"threshold": 11, "line_threshold": [7, 0, 0, 0, 0], "moderate_threshold": [9.0, 0, 0, 0, 0],
-             "severe_threshold": [5.0, 0, 0, 0, 0], "lanes": 3}
+             "severe_threshold": [5.0, 0, 0, 0, 0], "fitted_range": [0.4, 0.8, 40, 0.1, 0.3], "lanes": 3}
     defaults = node_defaults("grader", given)
     assert set(defaults) == set(GRADER)
     assert defaults["threshold"] == 11.0 and isinstance(defaults["threshold"], float)
@@ -79,3 +79,12 @@ def test_node_defaults_otherwise_come_from_the_resolved_calibration(no_env):
                                          "friction_dynamic": calibration.friction_dynamic}
     assert node_defaults("grader")["line_threshold"] == list(calibration.line_threshold)
 
+
+
+def test_the_fitted_range_is_five_finite_numbers(no_env):
+    calibration = resolved_calibration()
+    assert len(calibration.fitted_range) == 5
+    with pytest.raises(ValueError, match="fitted_range must be 5 finite numbers"):
+        dataclasses.replace(calibration, fitted_range=(0.4, 0.8, 40.0))
+    with pytest.raises(ValueError, match="fitted_range"):
+        dataclasses.replace(calibration, fitted_range=(0.4, float("nan"), 40.0, 0.1, 0.3))

@@ -75,4 +75,7 @@ def test_yaw_sd_turns_every_run_of_every_step_and_is_recorded(tmp_path, monkeypa
     for runs in planned:
         assert all(r.yaw_deg == mesh_yaw(r.mesh, 13.0) != 0.0 for r in runs)
     assert json.loads((tmp_path / "loo.json").read_text())["yaw_sd_deg"] == 13.0
-    assert calibrate._provenance(args, {})["yaw_sd_deg"] == 13.0
+    kept = {"fit_meshes": "generated-90000", "achieved_objective": 0.02, "date": "old"}
+    provenance = calibrate._provenance(args, {}, kept)  # --skip-physics keeps the physics fit's record, not the rest
+    assert provenance["yaw_sd_deg"] == 13.0 and provenance["fit_meshes"] == "generated-90000"
+    assert provenance["achieved_objective"] == 0.02 and provenance["date"] != "old"

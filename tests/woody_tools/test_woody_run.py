@@ -52,7 +52,22 @@ def test_woody_run_leaves_bag_table_and_report(tmp_path):
     report = subprocess.run([entry_point("woody"), "report", str(out / "line.mcap"), "--out", str(tmp_path / "again")],
                             capture_output=True, text=True, timeout=120)
     assert report.returncode == 0, report.stderr  # the namespaced bag's verdicts and ground truth are found
-    assert len((tmp_path / "again" / "verdicts.csv").read_text().splitlines()) == 4
+    again = list(csv.DictReader((tmp_path / "again" / "verdicts.csv").open()))
+    verdict = ["fillet_id", "lane", "verdict", "score", "reason", "truth"]  # the table is the bag's verdicts
+    assert [[r[c] for c in verdict] for r in again] == [[r[c] for c in verdict] for r in rows]
+
+
+def test_outside_the_calibrated_speeds_no_woody_fillet_is_graded_normal(tmp_path):
+    out = tmp_path / "run"
+    result = subprocess.run([entry_point("woody"), "run", "--fillets", "3", "--k", "100", "--speed-fpm", "400",
+                             "--gate-distance", "1.0", "--out", str(out)], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    note = "line speed 400 FPM is outside the 90..140 FPM the calibration's cuts were fitted on: fillets measured"
+    assert note in result.stderr and note in (out / "report.md").read_text()
+    rows = list(csv.DictReader((out / "verdicts.csv").open()))
+    assert len(rows) == 3 and {r["verdict"] for r in rows} == {"unscored"}, [(r["verdict"], r["reason"]) for r in rows]
+    assert all(r["reason"].startswith("outside the calibration: measured speed") for r in rows)
 
 
 def test_a_dying_node_stops_the_run_and_the_bag_is_finalised(tmp_path):

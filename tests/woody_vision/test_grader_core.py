@@ -16,7 +16,7 @@ from woody_vision.grader_core import (
     SideResult,
     TrackObservation,
 )
-from woody_vision.grading import GradingRules
+from woody_vision.grading import FittedRange, GradingRules
 from woody_vision.shape_score import REASON_LOST_IN_WINDOW, REASON_STARTED_PAST_EDGE, STATUS_SCORED
 from woody_vision.side_view import SideMeasurement
 from woody_vision.synthetic import teardrop_polygon
@@ -93,6 +93,17 @@ def test_classification_follows_the_rules():
     assert flexible.grade == rules.grade(flexible.shape.phi)
     assert stiff.label == "woody" and stiff.grade == "severe"
     assert FilletGrader(EDGE).on_tracks(0.0, []) == []
+
+
+def test_a_fillet_measured_outside_the_fitted_range_is_unscored_unless_asked():
+    slow = FittedRange(0.4, 0.8, 40.0, 0.0, 10.0)  # the contours move 90 px/s: 0.9 m/s at 100 px/m
+    ((_, outside),) = feed(FilletGrader(EDGE, GradingRules(1.0), pixels_per_metre=100.0, fitted_range=slow), 1, 0,
+                           contours(90))
+    assert outside.label == "unscored" and not outside.scored and outside.grade == ""
+    assert outside.reason.startswith("outside the calibration: measured speed 0.90 m/s")
+    ((_, graded),) = feed(FilletGrader(EDGE, GradingRules(1.0), pixels_per_metre=100.0, fitted_range=None), 1, 0,
+                          contours(90))
+    assert graded.label == "woody" and graded.scored
 
 
 def test_unscored_verdict_when_the_track_ends_in_the_window():

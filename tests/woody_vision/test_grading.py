@@ -7,7 +7,15 @@ import math
 import pytest
 
 from woody_common.line import REFERENCE_SPEED_MPS
-from woody_vision.grading import TIDY, Cut, FilletConditions, GradingRules, is_woody_array
+from woody_vision.grading import (
+    TIDY,
+    Cut,
+    FilletConditions,
+    FittedRange,
+    GradingRules,
+    fitted_range_of,
+    is_woody_array,
+)
 
 
 def test_grading_rules_classify_lower_phi_as_woody():
@@ -72,3 +80,32 @@ def test_one_rule_strictly_below_for_a_fillet_and_for_arrays():
     scores = [9.99, 10.0, 10.01]
     assert list(is_woody_array(scores, 10.0)) == [rules.is_woody(s) for s in scores] == [True, False, False]
     assert is_woody_array([[1.0], [3.0]], [2.0, 4.0]).tolist() == [[True, True], [False, True]]  # broadcasts
+
+
+RANGE = FittedRange(0.45, 0.72, 35.0, 0.15, 0.25)
+
+
+@pytest.mark.parametrize(("conditions", "says"), [
+    (FilletConditions(2.03, False, 10.0, 0.2), "measured speed 2.03 m/s, the cuts were fitted on 0.45-0.72 m/s"),
+    (FilletConditions(0.30, False, 10.0, 0.2), "measured speed 0.30 m/s"),
+    (FilletConditions(0.6, False, 44.0, 0.2), "measured turn 44 deg, the cuts were fitted on 0-35 deg"),
+    (FilletConditions(0.6, False, 10.0, 0.31), "measured body length 0.310 m"),
+])
+def test_conditions_outside_the_fitted_range_say_which_and_where(conditions, says):
+    assert RANGE.outside(conditions).startswith("outside the calibration: ") and says in RANGE.outside(conditions)
+
+
+def test_inside_within_the_measurement_slack_or_unmeasured_is_inside():
+    assert RANGE.outside(FilletConditions(0.74, True, 36.5, 0.26)) == ""
+    assert RANGE.outside(FilletConditions(math.nan, False, math.nan, math.nan)) == ""
+
+
+def test_a_fitted_range_is_validated_and_spans_its_rows():
+    with pytest.raises(ValueError, match="minimum exceeds its maximum"):
+        FittedRange(0.8, 0.4, 10.0, 0.1, 0.2)
+    with pytest.raises(ValueError, match="a fitted range is"):
+        FittedRange.of([0.4, 0.8])
+    rows = [FilletConditions(0.5, False, 3.0, 0.2), FilletConditions(0.7, True, 30.0, 0.16),
+            FilletConditions(math.nan, False, math.nan, math.nan)]
+    assert fitted_range_of(rows) == FittedRange(0.5, 0.7, 30.0, 0.16, 0.2)
+    assert FittedRange.of(RANGE.as_list()) == RANGE

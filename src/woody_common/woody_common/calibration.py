@@ -39,13 +39,17 @@ PACKAGE_DATA = ("woody_common.config", "calibration.yaml")
 _SECTIONS = {"line_sim": {"total_mass_kg": "mass", "hinge_damping": "damping", "friction_static": "friction_static",
                           "friction_dynamic": "friction_dynamic"},
              "grader": {"phi_threshold": "threshold", "line_threshold": "line_threshold",
-                        "moderate_threshold": "moderate_threshold", "severe_threshold": "severe_threshold"}}
+                        "moderate_threshold": "moderate_threshold", "severe_threshold": "severe_threshold",
+                        "fitted_range": "fitted_range"}}
 """Per node: dataclass field -> the node's parameter name."""
 _PROVENANCE = "woody_calibration"
 CUT_FIELDS = ("line_threshold", "moderate_threshold", "severe_threshold")
 """Fields that are cuts (``CUT_LENGTH`` numbers each) rather than single values."""
 CUT_LENGTH = 5
 """Numbers per cut (woody_vision.grading.CUT_TERMS; woody_common cannot import woody_vision)."""
+RANGE_LENGTH = 5
+"""Numbers in the fitted range (woody_vision.grading.RANGE_TERMS)."""
+LIST_FIELDS = (*CUT_FIELDS, "fitted_range")
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,9 @@ class Calibration:
     """The grade's normal/moderate cut on ``line_phi``, same form."""
     severe_threshold: tuple[float, ...]
     """The grade's moderate/severe cut on ``line_phi``, same form."""
+    fitted_range: tuple[float, ...]
+    """The measured conditions the cuts were fitted on: [speed min, speed max (m/s), turn max (degrees), body length
+    min, max (m)] (woody_vision.grading.FittedRange); the grader leaves a fillet outside them unscored."""
     provenance: dict = field(default_factory=dict, compare=False)
     """command, date, mesh sets, targets and achieved figures (free-form, flat str/float values)."""
 
@@ -84,6 +91,12 @@ class Calibration:
                 raise ValueError(f"calibration: {name} must be {CUT_LENGTH} finite numbers, the first > 0 "
                                  f"(woody_vision.grading.CUT_TERMS), got {value!r}")
             object.__setattr__(self, name, tuple(float(v) for v in value))
+        value = self.fitted_range
+        if (not isinstance(value, (list, tuple)) or len(value) != RANGE_LENGTH
+                or not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0 for v in value)):
+            raise ValueError(f"calibration: fitted_range must be {RANGE_LENGTH} finite numbers >= 0 "
+                             f"(woody_vision.grading.RANGE_TERMS), got {value!r}")
+        object.__setattr__(self, "fitted_range", tuple(float(v) for v in value))
         if self.total_mass_kg <= 0.0:
             raise ValueError(f"calibration: total_mass_kg must be > 0, got {self.total_mass_kg}")
 
@@ -173,8 +186,8 @@ def write_calibration(calibration: Calibration, path: str | Path | None = None, 
 
 
 def _value(value, name: str):
-    """A parameter's value: a list of floats for a cut, else a float."""
-    return [float(v) for v in value] if name in CUT_FIELDS else float(value)
+    """A parameter's value: a list of floats for a cut or the fitted range, else a float."""
+    return [float(v) for v in value] if name in LIST_FIELDS else float(value)
 
 
 def _plain(value):

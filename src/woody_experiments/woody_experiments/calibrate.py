@@ -50,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from woody_common.calibration import (
-    CUT_FIELDS,
+    LIST_FIELDS,
     Calibration,
     resolve_calibration,
     resolved_calibration,
@@ -141,13 +141,18 @@ def choose_line_cuts(cal_names: list[str], test_names: list[str], physics: dict,
                 for n in names for c in LINE_CONDITIONS for s in LINE_SPEEDS for k in LINE_K]
         return _evaluate(runs, spec, client, desc)
 
-    rules = line_grade.fit_rules(rows_for(cal_names, args.meshes, "line cuts (calibration set)"))
+    cal_rows = rows_for(cal_names, args.meshes, "line cuts (calibration set)")
+    rules = line_grade.fit_rules(cal_rows)
+    fitted = line_grade.fitted_range(cal_rows)
+    print(f"woody calibrate: fitted range {fitted.speed_min_mps:.3f}-{fitted.speed_max_mps:.3f} m/s, turns up to "
+          f"{fitted.turn_max_deg:.1f} deg, bodies {fitted.length_min_m:.3f}-{fitted.length_max_m:.3f} m")
     cuts = {"line_threshold": rules.threshold, "moderate_threshold": rules.moderate_threshold,
             "severe_threshold": rules.severe_threshold}
     for name, cut in cuts.items():
         print(f"woody calibrate: {name} = {cut.base:.3g} at 100 FPM narrow end first, "
               f"x exp({cut.speed_slope:+.3g}/(m/s)), x exp({cut.blunt_offset:+.3g}) blunt end first")
-    runs = line_grade.graded_runs(rows_for(test_names, args.test_meshes, "line cuts (held-out test set)"), rules)
+    runs = line_grade.graded_runs(rows_for(test_names, args.test_meshes, "line cuts (held-out test set)"), rules,
+                                  fitted)
     test = []
     for condition in LINE_CONDITIONS:
         for speed in LINE_SPEEDS:
@@ -158,7 +163,8 @@ def choose_line_cuts(cal_names: list[str], test_names: list[str], physics: dict,
             print(f"  held-out {condition} {speed:g} FPM: {summary.right}/{summary.total} normal vs severe, "
                   f"{summary.severe_passed} severe graded normal, three classes {summary.grade_right}/"
                   f"{summary.grade_total}")
-    return {"line_cuts": {name: cut.as_list() for name, cut in cuts.items()}, "line_test": test}
+    return {"line_cuts": {name: cut.as_list() for name, cut in cuts.items()}, "fitted_range": fitted.as_list(),
+            "line_test": test}
 
 
 def _speed_effect(rows: list[dict]) -> dict:
@@ -185,13 +191,20 @@ def _held_out(rows: list[dict], threshold: float) -> list[dict]:
     return per
 
 
-def _provenance(args: argparse.Namespace, report: dict) -> dict:
-    """Flat key -> value record of how the calibration was made and what it reached."""
+PHYSICS_PROVENANCE = ("fit_meshes", "achieved_nmdm", "achieved_delta", "achieved_objective")
+"""Provenance keys (or their beginnings) of the physics fit: kept from the current calibration by --skip-physics."""
+
+
+def _provenance(args: argparse.Namespace, report: dict, current: dict) -> dict:
+    """Flat key -> value record of how the calibration was made and what it reached; with ``--skip-physics`` the
+    physics fit's record of the ``current`` calibration stays (its values do)."""
     out = {"command": "woody calibrate " + shlex.join(sys.argv[2:]), "date": time.strftime("%Y-%m-%d %H:%M:%S"),
            "calibration_meshes": args.meshes, "fit_meshes": report.get("fit_meshes", ""),
            "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd,
            "targets": "paper Table sv_results (NMDM at k 0/10/100/200/400, "
            "100 and 130 FPM); ΔNMDM(k=100-k=0) 0.20-0.32; NMDM(k=0) gain >= 0.05 at 130 FPM"}
+    if args.skip_physics:
+        out.update({k: v for k, v in current.items() if k.startswith(PHYSICS_PROVENANCE)})
     best = min(report.get("physics_fit", []), key=lambda e: e["objective"], default=None)
     if best is not None:
         out.update({f"achieved_{k}": round(v, 4) for k, v in best.items() if k.startswith(("nmdm", "delta"))})
@@ -255,16 +268,17 @@ def calibrate(args: argparse.Namespace, client) -> int:
               f"mu = {physics['friction_static']:g}")
     report["physics"] = physics
     threshold = current.phi_threshold
-    cuts = {name: getattr(current, name) for name in CUT_FIELDS}
+    cuts = {name: getattr(current, name) for name in LIST_FIELDS}
     if not args.skip_threshold:
         report.update(choose_threshold(cal_names, test_names, physics, args, client))
         report.update(choose_line_cuts(cal_names, test_names, physics, args, client))
-        threshold, cuts = report["threshold"], report["line_cuts"]
+        threshold, cuts = report["threshold"], {**report["line_cuts"], "fitted_range": report["fitted_range"]}
     report["wall_s"] = round(time.perf_counter() - t0, 1)
     (out / "calibration.json").write_text(json.dumps(report, indent=2))
     _write_md(out / "calibration.md", report)
     if not args.dry_run:
-        calibration = Calibration(**physics, phi_threshold=threshold, **cuts, provenance=_provenance(args, report))
+        provenance = _provenance(args, report, current.provenance)
+        calibration = Calibration(**physics, phi_threshold=threshold, **cuts, provenance=provenance)
         path = write_calibration(calibration, args.calibration, header=CALIBRATION_HEADER)
         print(f"woody calibrate: wrote {path}")
     return 0

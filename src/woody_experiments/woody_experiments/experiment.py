@@ -246,7 +246,8 @@ class _TopView:
         top_cam = geometry.top_camera()
         layout = LaneLayout(tuple(top_cam.k.reshape(-1)), geometry.top_height, spec.lanes, geometry.lane_pitch)
         self.grader = FilletGrader(geometry.top_edge_row(), rules, watched_lane=None,
-                                   pixels_per_metre=float(top_cam.k[1, 1]) / geometry.top_height)
+                                   pixels_per_metre=float(top_cam.k[1, 1]) / geometry.top_height,
+                                   fitted_range=None)  # rows are measurements: the reports apply the range
         self.tracker = CentroidTracker(lane_layout=layout)
         self.camera, self.rng = sensor_preset(spec.sensor), np.random.default_rng(_sensor_seed(spec))
         self.color_rng = np.random.default_rng((_sensor_seed(spec), 1))

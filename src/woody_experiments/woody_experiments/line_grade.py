@@ -32,11 +32,13 @@ from woody_vision.grading import (
     GRADE_NORMAL,
     GRADE_SEVERE,
     LABEL_NORMAL,
-    LABEL_WOODY,
+    LABEL_UNSCORED,
     Cut,
     FilletConditions,
+    FittedRange,
     GradingRules,
     covariates,
+    fitted_range_of,
 )
 from woody_vision.shape_score import LEADING_BLUNT
 
@@ -85,6 +87,11 @@ def scored(rows: Sequence[dict]) -> list[dict]:
             and math.isfinite(r.get("speed_mps", math.nan))]
 
 
+def fitted_range(rows: Sequence[dict]) -> FittedRange:
+    """The measured conditions of the scored rows the cuts are fitted on (:func:`fit_rules`)."""
+    return fitted_range_of([conditions_of(r) for r in scored(rows)])
+
+
 def fit_rules(rows: Sequence[dict]) -> GradingRules:
     """The reject cut (k = 0 vs k = 100) and the grade's two cuts, from scored rows of several k."""
     rows = scored(rows)
@@ -108,11 +115,13 @@ class GradedRun:
     margin: float
     """ln(score / reject cut): negative is woody."""
     label: str
+    """'normal', 'woody' or 'unscored' (measured outside the fitted range)."""
     grade: str
 
 
-def graded_runs(rows: Sequence[dict], rules: GradingRules) -> list[GradedRun]:
-    """Every run with a scored lane, graded on its median line score and median measured conditions."""
+def graded_runs(rows: Sequence[dict], rules: GradingRules, fitted: FittedRange | None = None) -> list[GradedRun]:
+    """Every run with a scored lane, graded on its median line score and median measured conditions; a run
+    measured outside ``fitted`` is unscored, as the grader leaves such a fillet (the gate diverts it)."""
     groups: dict[tuple, list[dict]] = {}
     for r in scored(rows):
         groups.setdefault((r["mesh"], r["k"], r["speed_fpm"], r.get("condition") or "tidy"), []).append(r)
@@ -125,8 +134,9 @@ def graded_runs(rows: Sequence[dict], rules: GradingRules) -> list[GradedRun]:
                                     float(np.median([c.turn_deg for c in each])),
                                     float(np.median([c.length_m for c in each])))
         decision = rules.classify(score, measured)
+        unscored = fitted is not None and fitted.outside(measured)
         out.append(GradedRun(mesh, k, speed, condition, score, math.log(score / decision.threshold),
-                             decision.label, decision.grade or ""))
+                             LABEL_UNSCORED if unscored else decision.label, "" if unscored else decision.grade or ""))
     return out
 
 
@@ -143,6 +153,9 @@ class GradeSummary:
     confusion: dict[tuple[str, str], int]
     """(true grade, graded) -> runs, over every k."""
     meshes: int
+    unscored: int = 0
+    """Runs measured outside the fitted range: unscored, so diverted (right for a severe run, wrong for a normal
+    one)."""
 
     @property
     def right(self) -> int:
@@ -176,6 +189,6 @@ def summarise(runs: Sequence[GradedRun]) -> GradeSummary:
         confusion[key] = confusion.get(key, 0) + 1
     return GradeSummary(
         normal_right=sum(r.label == LABEL_NORMAL for r in normal), normal_total=len(normal),
-        severe_right=sum(r.label == LABEL_WOODY for r in severe), severe_total=len(severe),
+        severe_right=sum(r.label != LABEL_NORMAL for r in severe), severe_total=len(severe),
         auc=roc([r.margin for r in normal], [r.margin for r in severe])[2], confusion=confusion,
-        meshes=len({r.mesh for r in runs}))
+        meshes=len({r.mesh for r in runs}), unscored=sum(r.label == LABEL_UNSCORED for r in runs))

@@ -8,6 +8,7 @@ FilletVerdict and SideMetrics into :mod:`woody_experiments.run_report`'s `Spawn`
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from woody_bag.errors import BagError
@@ -41,34 +42,62 @@ def side_from_msg(msg) -> SideRecord:
                       reason=msg.reason)
 
 
-def rows_from_bag(path: Path, woody_k: float = 50.0) -> tuple[list[dict], str | None]:
-    """Ground truth, verdicts, side metrics and gate commands recorded in a bag (of a line in any namespace), joined
-    into verdict-table rows, and where a truncated bag ends (None for a complete one): the readable part of a cut
-    recording still counts. A bag without the gate's topic leaves the rows' ``gate_command`` unknown."""
-    spawns, verdicts, sides, gated, ended = [], [], [], set(), None
-    suffixes = {"/" + topics.GROUND_TRUTH: "spawn", "/" + topics.VERDICTS: "verdict",
-                "/" + topics.SIDE_METRICS: "side", "/" + topics.GATE_COMMANDS: "gate"}
+@dataclass
+class LineRecords:
+    """What the line published about its fillets: ground truth, verdicts, side metrics and gate commands."""
+
+    spawns: list[Spawn] = field(default_factory=list)
+    verdicts: list[Verdict] = field(default_factory=list)
+    sides: list[SideRecord] = field(default_factory=list)
+    gated: set[tuple[int, int]] | None = field(default_factory=set)
+    """(lane, fillet id) of every GateCommand; None when the gate's topic was not recorded."""
+
+    def merged(self, other: LineRecords) -> LineRecords:
+        """These records and ``other``'s, each message once: a verdict one record lost, the other may hold."""
+        def union(mine: list, theirs: list, key) -> list:
+            seen = {key(item) for item in mine}
+            return mine + [item for item in theirs if key(item) not in seen]
+
+        gated = None if self.gated is None and other.gated is None else (self.gated or set()) | (other.gated or set())
+        return LineRecords(union(self.spawns, other.spawns, lambda s: s.sim_id),
+                           union(self.verdicts, other.verdicts, lambda v: (v.lane, v.fillet_id)),
+                           union(self.sides, other.sides, lambda s: (s.lane, s.fillet_id)), gated)
+
+    def rows(self, woody_k: float = 50.0) -> list[dict]:
+        """The verdict table's rows (woody_experiments.run_report.join)."""
+        return join(self.spawns, self.verdicts, woody_k, gate_commands=self.gated, sides=self.sides)
+
+
+def records_from_bag(path: Path) -> tuple[LineRecords, str | None]:
+    """The line's records in a bag (of a line in any namespace), and where a truncated bag ends (None for a complete
+    one): the readable part of a cut recording still counts."""
+    records, ended = LineRecords(), None
+    suffixes = {"/" + topics.GROUND_TRUTH: records.spawns.append, "/" + topics.VERDICTS: records.verdicts.append,
+                "/" + topics.SIDE_METRICS: records.sides.append, "/" + topics.GATE_COMMANDS: records.gated.add}
+    flatten = {"/" + topics.GROUND_TRUTH: spawn_from_msg, "/" + topics.VERDICTS: verdict_from_msg,
+               "/" + topics.SIDE_METRICS: side_from_msg, "/" + topics.GATE_COMMANDS: lambda m: (m.lane, m.fillet_id)}
+    wanted = [t for t in bag_topics(path) if t.endswith(tuple(suffixes))]
     try:
-        wanted = [t for t in bag_topics(path) if t.endswith(tuple(suffixes))]
         for topic, type_name, data, _log_time in read_bag(path, topics=wanted):
-            msg = decode(type_name, data)
-            kind = next(kind for suffix, kind in suffixes.items() if topic.endswith(suffix))
-            if kind == "spawn":
-                spawns.append(spawn_from_msg(msg))
-            elif kind == "verdict":
-                verdicts.append(verdict_from_msg(msg))
-            elif kind == "side":
-                sides.append(side_from_msg(msg))
-            else:
-                gated.add((msg.lane, msg.fillet_id))
+            suffix = next(suffix for suffix in suffixes if topic.endswith(suffix))
+            suffixes[suffix](flatten[suffix](decode(type_name, data)))
     except BagError as exc:
-        if not spawns and not verdicts:
+        if not records.spawns and not records.verdicts:
             raise
         ended = str(exc)
-    if not spawns and not verdicts:
+    if not any(t.endswith("/" + topics.GATE_COMMANDS) for t in wanted):
+        records.gated = None
+    return records, ended
+
+
+def rows_from_bag(path: Path, woody_k: float = 50.0) -> tuple[list[dict], str | None]:
+    """Ground truth, verdicts, side metrics and gate commands recorded in a bag, joined into verdict-table rows, and
+    where a truncated bag ends (None for a complete one). A bag without the gate's topic leaves the rows'
+    ``gate_command`` unknown."""
+    records, ended = records_from_bag(path)
+    if not records.spawns and not records.verdicts:
         raise ValueError(f"{path}: no /line/ground_truth or /grading/verdicts messages in this bag")
-    has_gate = any(t.endswith("/" + topics.GATE_COMMANDS) for t in wanted)
-    return join(spawns, verdicts, woody_k, gate_commands=gated if has_gate else None, sides=sides), ended
+    return records.rows(woody_k), ended
 
 
 def settings_from_bag(path: Path, rows: list[dict]) -> dict | None:

@@ -40,6 +40,9 @@ RECORDING = "recording"
 CALIBRATED_SPEEDS = "calibrated line speeds (FPM)"
 """Run setting: the lowest and highest line speed the calibration's cuts were fitted on, "LOW..HIGH"."""
 
+OUTSIDE_GRADED = "fillets outside the calibration graded"
+"""Run setting: True when the grader grades fillets measured outside the fitted range (else they are unscored)."""
+
 MATCH_TOLERANCE_S = 0.6
 """A verdict belongs to a spawned fillet when it closes this close to the expected edge crossing."""
 
@@ -187,11 +190,12 @@ def _row(spawn: Spawn | None, verdict: Verdict | None, woody_k: float) -> dict:
     return row
 
 
-def write_csv(rows: Iterable[dict], path: Path) -> Path:
+def write_csv(rows: Iterable[dict], path: Path, columns: Sequence[str] = VERDICT_COLUMNS) -> Path:
+    """The rows as a CSV of ``columns`` (verdicts.csv's by default), NaN as an empty cell."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=VERDICT_COLUMNS, extrasaction="ignore")
+        writer = csv.DictWriter(handle, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()
         for row in rows:
             writer.writerow({key: _fmt(value) for key, value in row.items()})
@@ -310,6 +314,22 @@ def grade_confusion(rows: Sequence[dict]) -> dict[tuple[str, str], int]:
     return confusion
 
 
+def grade_confusion_lines(rows: Sequence[dict]) -> list[str]:
+    """The three-class grade of the rows as Markdown: how the truth is set, the share graded right and the confusion
+    matrix (truth rows, graded columns)."""
+    confusion = grade_confusion(rows)
+    graded = list(GRADES) + sorted({g for _, g in confusion} - set(GRADES))
+    right = sum(n for (t, g), n in confusion.items() if t == g)
+    total = sum(confusion.values())
+    lines = ["Truth from the stiffness: normal k = 0, moderate 0 < k < 40, severe k >= 40.", "",
+             f"- graded right: {right} of {total}" + (f" (**{right / total:.1%}**)" if total else ""), "",
+             "| truth \\ graded | " + " | ".join(graded) + " |", "|---" * (len(graded) + 1) + "|"]
+    for truth in GRADES:
+        if any(t == truth for t, _ in confusion):
+            lines.append(f"| {truth} | " + " | ".join(str(confusion.get((truth, g), 0)) for g in graded) + " |")
+    return lines
+
+
 def diversion_by_condition(rows: Sequence[dict], divert_unscored: bool) -> list[tuple[str, int, int, list[str]]]:
     """Per condition (line speed at spawn, leading end the grader measured): (condition, woody fillets, diverted,
     the missed ones as "fillet id (verdict, score)")."""
@@ -387,13 +407,16 @@ def _cell(value: object) -> str:
     return str("" if value is None else value)
 
 
-def uncalibrated_speed_note(fpm: float, calibrated: tuple[float, float] | None) -> str | None:
+def uncalibrated_speed_note(fpm: float, calibrated: tuple[float, float] | None, graded: bool = False) -> str | None:
     """The warning for a line speed outside the ``calibrated`` (lowest, highest) FPM of the grading cuts; None
-    inside it or when the calibration does not record its speeds."""
+    inside it or when the calibration does not record its speeds. ``graded``: the grader grades such fillets anyway
+    (grade_outside_calibration) instead of leaving them unscored."""
     if calibrated is None or calibrated[0] <= fpm <= calibrated[1]:
         return None
+    what = ("they are graded on extrapolated cuts, not validated at this speed" if graded
+            else "fillets measured outside them are unscored, so diverted")
     return (f"line speed {fpm:g} FPM is outside the {calibrated[0]:g}..{calibrated[1]:g} FPM the calibration's cuts "
-            "were fitted on: the grade is not validated at this speed")
+            f"were fitted on: {what}")
 
 
 def calibrated_speeds(run_info: dict | None) -> tuple[float, float] | None:
@@ -409,7 +432,9 @@ def speed_notes_of(rows: Sequence[dict], run_info: dict | None) -> list[str]:
     """A warning per line speed of the fillets (at their spawn) outside the calibrated speeds."""
     speeds = sorted({r["speed_fpm"] for r in rows if isinstance(r.get("speed_fpm"), float)
                      and math.isfinite(r["speed_fpm"])})
-    return [note for note in (uncalibrated_speed_note(fpm, calibrated_speeds(run_info)) for fpm in speeds) if note]
+    graded = bool((run_info or {}).get(OUTSIDE_GRADED, False))
+    return [note for note in (uncalibrated_speed_note(fpm, calibrated_speeds(run_info), graded) for fpm in speeds)
+            if note]
 
 
 def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody line run",
@@ -464,17 +489,7 @@ def _line_sections(rows: Sequence[dict], acc: Accuracy) -> list[str]:
              "| condition | woody fillets | diverted | missed (verdict, score) |", "|---|---|---|---|"]
     lines += [f"| {key} | {n} | {n_out} | {', '.join(missed) or '–'} |"
               for key, n, n_out, missed in diversion_by_condition(rows, acc.divert_unscored)]
-    confusion = grade_confusion(rows)
-    graded = list(GRADES) + sorted({g for _, g in confusion} - set(GRADES))
-    right = sum(n for (t, g), n in confusion.items() if t == g)
-    total = sum(confusion.values())
-    lines += ["", "## Three-class grade", "",
-              "Truth from the stiffness: normal k = 0, moderate 0 < k < 40, severe k >= 40.", "",
-              f"- graded right: {right} of {total}" + (f" (**{right / total:.1%}**)" if total else ""), "",
-              "| truth \\ graded | " + " | ".join(graded) + " |", "|---" * (len(graded) + 1) + "|"]
-    for truth in GRADES:
-        if any(t == truth for t, _ in confusion):
-            lines.append(f"| {truth} | " + " | ".join(str(confusion.get((truth, g), 0)) for g in graded) + " |")
+    lines += ["", "## Three-class grade", "", *grade_confusion_lines(rows)]
     unscored = [f"{r.get('fillet_id') or r.get('sim_id')}: {r.get('reason') or r['verdict']}" for r in rows
                 if r.get("truth") and r["verdict"] not in ("normal", "woody")]
     if unscored:

@@ -37,9 +37,9 @@ from woody_experiments.paper_targets import (
     SPEED_GAIN_MIN,
 )
 from woody_experiments.runs_csv import read_runs
-from woody_experiments.statistics import accuracy, best_threshold, finite, mean_sd, roc, wilson_interval
+from woody_experiments.statistics import accuracy, best_threshold, finite, mean_sd, roc, share_text
 from woody_sim.meshes import load_mesh_set
-from woody_vision.grader_core import calibrated_rules
+from woody_vision.grader_core import calibrated_range, calibrated_rules
 
 FULL_GRID_EVALS = 1000 * 6 * 2 * 3
 GOAL_EVALS_PER_MIN = 150.0
@@ -162,7 +162,8 @@ def build(out: Path, meta: dict | None = None, docs: Path | None = None,
         lines += section_lines
         checks += section_checks
     set_lines, set_checks = evaluation.report(grid.rows, grid.threshold)
-    lines += set_lines + _line_grade(rows, calibrated_rules(calibration), calibration.provenance)
+    lines += set_lines + _line_grade(rows, calibrated_rules(calibration), calibrated_range(calibration),
+                                    calibration.provenance)
     lines += _targets_and_plots(checks + set_checks)
     text = "\n".join(lines) + "\n"
     md = out / "results.md"
@@ -377,9 +378,10 @@ def _paper_rows(rows: list[dict]) -> list[dict]:
     return paper or [r for r in rows if (r.get("condition") or TIDY) == TIDY]
 
 
-def _line_grade(rows: list[dict], rules, provenance: dict) -> list[str]:
-    """The line's grade (line_phi against the calibrated cuts) per condition and speed, one vote per run."""
-    runs = line_grade.graded_runs(rows, rules)
+def _line_grade(rows: list[dict], rules, fitted, provenance: dict) -> list[str]:
+    """The line's grade (line_phi against the calibrated cuts) per condition and speed, one vote per run; a run
+    measured outside the calibration's fitted range is unscored (diverted), as the grader leaves it."""
+    runs = line_grade.graded_runs(rows, rules, fitted)
     if not runs:
         return []
     L = ["## The line's grade on a messy line\n",
@@ -388,25 +390,25 @@ def _line_grade(rows: list[dict], rules, provenance: dict) -> list[str]:
          f"`{provenance.get('calibration_meshes', '?')}` (conditions {provenance.get('line_conditions', '?')}, "
          f"{provenance.get('line_speeds_fpm', '?')} FPM); every mesh here is disjoint from them. One vote per run "
          "(median over its lanes); normal k = 0 vs severe k = 100; three classes normal k = 0 / moderate "
-         "0 < k < 40 / severe k ≥ 40. 95 % Wilson intervals.\n",
-         "| condition | FPM | meshes | normal vs severe | severe graded normal | AUC | three classes |",
-         "|---|---|---|---|---|---|---|"]
+         "0 < k < 40 / severe k ≥ 40. 95 % Wilson intervals. A run measured outside the conditions the cuts were "
+         f"fitted on ({_range_text(fitted)}) is unscored and diverted, as the grader leaves such a fillet.\n",
+         "| condition | FPM | meshes | normal vs severe | severe graded normal | unscored (outside the calibration) | "
+         "AUC | three classes |",
+         "|---|---|---|---|---|---|---|---|"]
     for condition in dict.fromkeys(r.condition for r in runs):
         for speed in sorted({r.speed_fpm for r in runs if r.condition == condition}):
             summary = line_grade.summarise([r for r in runs if r.condition == condition and r.speed_fpm == speed])
-            L.append(f"| {condition} | {speed:g} | {summary.meshes} | {_share(summary.right, summary.total)} | "
-                     f"{summary.severe_passed} of {summary.severe_total} | {summary.auc:.3f} | "
-                     f"{_share(summary.grade_right, summary.grade_total)} |")
+            L.append(f"| {condition} | {speed:g} | {summary.meshes} | {share_text(summary.right, summary.total)} | "
+                     f"{summary.severe_passed} of {summary.severe_total} | {summary.unscored} | {summary.auc:.3f} | "
+                     f"{share_text(summary.grade_right, summary.grade_total)} |")
     for condition in dict.fromkeys(r.condition for r in runs):
         L += _confusion(condition, line_grade.summarise([r for r in runs if r.condition == condition]))
     return L
 
 
-def _share(right: int, total: int) -> str:
-    if not total:
-        return "—"
-    lo, hi = wilson_interval(right, total)
-    return f"{right / total * 100:.1f} % ({right}/{total}; {lo * 100:.0f}–{hi * 100:.0f} %)"
+def _range_text(fitted) -> str:
+    return (f"{fitted.speed_min_mps:.2f}-{fitted.speed_max_mps:.2f} m/s, turned up to {fitted.turn_max_deg:.0f} deg, "
+            f"bodies {fitted.length_min_m:.3f}-{fitted.length_max_m:.3f} m")
 
 
 def _confusion(condition: str, summary) -> list[str]:

@@ -28,10 +28,11 @@ from woody_common.dds_shm import remove_stale
 from woody_common.line import fpm_to_mps, spacing_at_rate, watched_lane
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.fillet_pictures import write_fillet_pictures
-from woody_experiments.messages import side_from_msg, spawn_from_msg, verdict_from_msg
+from woody_experiments.messages import LineRecords, records_from_bag, side_from_msg, spawn_from_msg, verdict_from_msg
 from woody_experiments.run_report import (
     CALIBRATED_SPEEDS,
     MATCH_TOLERANCE_S,
+    OUTSIDE_GRADED,
     RECORDING,
     UNSCORED_DIVERTED,
     SideRecord,
@@ -39,7 +40,6 @@ from woody_experiments.run_report import (
     Verdict,
     build_report,
     diversion_summary,
-    join,
     uncalibrated_speed_note,
     unscored_diverted,
     verdict_table,
@@ -65,7 +65,7 @@ HANGUP_LOG = "woody_run.log"
 """In the run's logs/: what woody run prints once its terminal has closed (SIGHUP)."""
 INTERRUPTED = "interrupted"
 """Why the watch ended early: a stop signal (STOP)."""
-LOST_NOTE = "the bag misses them (verdicts.csv does not: it is written from the live line)"
+LOST_NOTE = "the bag misses them (verdicts.csv does not: it joins the bag with what woody run heard live)"
 """Follows the messages the recorder lost in woody run's line and report.md's note."""
 OUTPUTS_UNWRITTEN = "cannot write to"
 """Begins woody run's line when --out takes no more (a full disk); the exit code is then 1."""
@@ -227,7 +227,8 @@ def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, obj
             "lane pitch (m)": args.lane_pitch_m, "in-lane spacing (m)": spacing,
             "speed change": (f"to {args.speed_change_fpm:g} FPM at {args.speed_change_at:g} s"
                              if args.speed_change_fpm else "none"),
-            UNSCORED_DIVERTED: True, "gate distance (m)": args.gate_distance, "namespace": args.namespace or "/",
+            UNSCORED_DIVERTED: True, OUTSIDE_GRADED: args.grade_outside_calibration,
+            "gate distance (m)": args.gate_distance, "namespace": args.namespace or "/",
             CALIBRATED_SPEEDS: "..".join(f"{v:g}" for v in args.calibrated_speeds) if args.calibrated_speeds
             else "not recorded in the calibration"}
 
@@ -276,7 +277,8 @@ def speed_notes(args: argparse.Namespace) -> list[str]:
     """A line per belt speed of the run (its --speed-fpm and --speed-change) outside the speeds the calibration's
     cuts were fitted on: the grade is not validated there."""
     speeds = dict.fromkeys((args.speed_fpm, args.speed_change_fpm or args.speed_fpm))
-    return [note for note in (uncalibrated_speed_note(fpm, args.calibrated_speeds) for fpm in speeds) if note]
+    notes = (uncalibrated_speed_note(fpm, args.calibrated_speeds, args.grade_outside_calibration) for fpm in speeds)
+    return [note for note in notes if note]
 
 
 def _refuse_foreign_nodes(monitor: LineMonitor, domain_id: int, seconds: float = 4.0) -> None:
@@ -347,7 +349,7 @@ def _sim_params(args: argparse.Namespace, fillets: int | None) -> dict[str, obje
 
 def _grader_params(args: argparse.Namespace, vision_params: dict[str, object]) -> dict[str, object]:
     """The grader's: the score it grades and, with --threshold, a constant reject cut on that score."""
-    params = dict(vision_params)
+    params = dict(vision_params, grade_outside_calibration=args.grade_outside_calibration)
     if args.score is not None:
         params["score"] = args.score
     if args.threshold is not None:
@@ -504,10 +506,11 @@ def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, mon
     """Print the verdict table, write verdicts.csv, report.md and the fillet pictures; the lines woody run adds on
     stderr: messages the recorder lost, and `OUTPUTS_UNWRITTEN` when --out takes no more (a full disk: the table
     printed first is then the record of what was graded)."""
-    rows = join(monitor.spawns, monitor.verdicts, gate_commands=monitor.gate_commands, sides=monitor.sides)
+    records = line_records(out / "line.mcap", monitor)
+    rows = records.rows()
     info = dict(run_settings(args, fillets))
-    info.update({"fillets spawned": len(monitor.spawns), "verdicts": len(monitor.verdicts),
-                 "gate commands": len(monitor.gate_commands), "sim time (s)": f"{monitor.sim_time:.1f}"})
+    info.update({"fillets spawned": len(records.spawns), "verdicts": len(records.verdicts),
+                 "gate commands": len(records.gated or ()), "sim time (s)": f"{monitor.sim_time:.1f}"})
     recording, lost = recording_summary(out / "line.mcap")
     info[RECORDING] = recording
     problems = [f"recorder: {lost}: {LOST_NOTE}"] if lost else []
@@ -532,6 +535,17 @@ def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, mon
     for line in mesh_notes + speed_notes(args):
         print(line)
     return problems
+
+
+def line_records(bag: Path, monitor: LineMonitor) -> LineRecords:
+    """What the line published, from the bag (the record of what the nodes sent, read after they stopped) together
+    with what this process heard live (a message the recorder lost): every published verdict, once."""
+    live = LineRecords(monitor.spawns, monitor.verdicts, monitor.sides, monitor.gate_commands)
+    try:
+        recorded, _ = records_from_bag(bag)
+    except (BagError, OSError, ValueError):  # no bag, or nothing readable in it: the live record is all there is
+        return live
+    return recorded.merged(live)
 
 
 def recording_summary(bag: Path) -> tuple[str, str | None]:

@@ -22,16 +22,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from woody_common.calibration import resolved_calibration
-from woody_vision.grading import FilletConditions, GradingRules
+from woody_vision.grading import LABEL_UNSCORED, FilletConditions, FittedRange, GradingRules
 from woody_vision.shape_score import (
     LEADING_BLUNT,
     REASON_STARTED_PAST_EDGE,
     STATUS_SCORED,
+    STATUS_UNSCORED,
     ShapeEvaluator,
     ShapeResult,
 )
@@ -53,6 +54,11 @@ SIDE_MATCH_SLACK_S = 0.3
 def calibrated_rules(calibration) -> GradingRules:
     """The line's rules from a calibration: the reject cut and the grade's two cuts on ``line_phi``."""
     return GradingRules(calibration.line_threshold, calibration.moderate_threshold, calibration.severe_threshold)
+
+
+def calibrated_range(calibration) -> FittedRange:
+    """The measured conditions a calibration's cuts were fitted on."""
+    return FittedRange.of(calibration.fitted_range)
 
 
 @dataclass(frozen=True)
@@ -145,6 +151,8 @@ class FilletGrader:
     """Top camera pixels per metre on the belt plane (focal length / height): turns image speed into m/s."""
     score: str = SCORE_LINE
     """'line': grade ``line_phi`` (the default, robust to speed, direction and turn); 'paper': the paper's Φ."""
+    fitted_range: FittedRange | None = field(default_factory=lambda: calibrated_range(resolved_calibration()))
+    """A fillet measured outside it is unscored (fail safe); None grades every fillet (a user's explicit choice)."""
 
     def __post_init__(self) -> None:
         check_score(self.score)
@@ -254,7 +262,11 @@ class FilletGrader:
         conditions = FilletConditions(result.speed_px_s / self.pixels_per_metre, result.leading_end == LEADING_BLUNT,
                                       result.turn_deg, result.length_px / self.pixels_per_metre)
         if not (usable and math.isfinite(score)):
-            return GradedFillet(track_id, lane, result, "unscored", "", conditions=conditions)
+            return GradedFillet(track_id, lane, result, LABEL_UNSCORED, "", conditions=conditions)
+        outside = self.fitted_range.outside(conditions) if self.fitted_range is not None else ""
+        if outside:
+            result = replace(result, status=STATUS_UNSCORED, reason="; ".join(r for r in (outside, result.reason) if r))
+            return GradedFillet(track_id, lane, result, LABEL_UNSCORED, "", conditions=conditions)
         decision = self.rules.classify(score, conditions)
         return GradedFillet(track_id, lane, result, decision.label, decision.grade or "", score=score,
                             conditions=conditions, threshold=decision.threshold)

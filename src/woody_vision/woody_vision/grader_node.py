@@ -63,7 +63,7 @@ from woody_vision.grader_core import (
     TrackObservation,
     check_score,
 )
-from woody_vision.grading import THRESHOLD_RANGE, Cut, FilletConditions, GradingRules
+from woody_vision.grading import THRESHOLD_RANGE, Cut, FilletConditions, FittedRange, GradingRules
 from woody_vision.image_encodings import color_rgb
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.overlays import FRAME, REFERENCE, Overlay, outline, verdict_overlays
@@ -178,13 +178,21 @@ class Grader(Node):
              "degree; d ln(cut)/d length per m]; the default is the calibrated one."),
             ("moderate_threshold", "With score line: line_phi below this cut grades at least moderate (same form)."),
             ("severe_threshold", "With score line: line_phi below this cut grades severe (same form)."))]
+        fitted = FittedRange.of(declare(self, "fitted_range", defaults["fitted_range"], "The measured conditions "
+                                        "the cuts were fitted on, [speed min, speed max (m/s), turn max (degrees), "
+                                        "body length min, max (m)]: a fillet measured outside them is unscored with "
+                                        "the reason (the gate diverts it); the default is the calibrated one."))
+        outside = declare(self, "grade_outside_calibration", False, "Grade fillets measured outside fitted_range "
+                          "anyway, on extrapolated cuts (at 400 FPM those pass every woody fillet).")
+        self.fitted_range = None if outside else fitted
         return GradingRules(paper) if self.score == SCORE_PAPER else GradingRules(*cuts)
 
     def on_camera_info(self, info: CameraInfo) -> None:
         if self.core is None and info.k[0] > 0:
             row = edge_row(tuple(info.k), self.camera_height, self.edge_offset)
             self.core = FilletGrader(row, self.rules, self.watched_lane if self.side else None, self.side_wait,
-                                     self.evaluator_options, info.k[4] / self.camera_height, self.score)
+                                     self.evaluator_options, info.k[4] / self.camera_height, self.score,
+                                     self.fitted_range)
             self.get_logger().info(f"roller edge at image row {row:.1f} (from camera_info K, camera height "
                                    f"{self.camera_height} m, edge offset {self.edge_offset} m)")
             early, self.early_tracks = self.early_tracks, deque()

@@ -36,6 +36,7 @@ from woody_common.line import REFERENCE_SPEED_MPS
 
 LABEL_NORMAL = "normal"
 LABEL_WOODY = "woody"
+LABEL_UNSCORED = "unscored"
 GRADE_NORMAL = "normal"
 GRADE_MODERATE = "moderate"
 GRADE_SEVERE = "severe"
@@ -177,6 +178,70 @@ class GradingRules:
         """Reject label, optional grade and the reject cut applied."""
         return Classification(label=LABEL_WOODY if self.is_woody(score, conditions) else LABEL_NORMAL,
                               grade=self.grade(score, conditions), threshold=self.threshold.at(conditions))
+
+
+RANGE_SLACK = 0.05
+"""A measured speed or length may lie this fraction beyond the fitted range (the measurement's own error)."""
+TURN_SLACK_DEG = 2.0
+"""A measured turn may lie this far beyond the largest turn fitted (degrees)."""
+RANGE_TERMS = ("speed_min_mps", "speed_max_mps", "turn_max_deg", "length_min_m", "length_max_m")
+"""A fitted range as a list (a ROS parameter, a calibration entry): these fields in this order."""
+
+
+@dataclass(frozen=True)
+class FittedRange:
+    """The measured conditions the cuts were fitted on. Outside them a cut is extrapolated and may pass a woody
+    fillet (at 400 FPM every one), so the grader leaves such a fillet unscored: the gate diverts it."""
+
+    speed_min_mps: float
+    speed_max_mps: float
+    turn_max_deg: float
+    length_min_m: float
+    length_max_m: float
+
+    def __post_init__(self) -> None:
+        values = self.as_list()
+        if not all(math.isfinite(v) and v >= 0.0 for v in values):
+            raise ValueError(f"a fitted range is [{', '.join(RANGE_TERMS)}], finite and >= 0, got {values}")
+        if self.speed_min_mps > self.speed_max_mps or self.length_min_m > self.length_max_m:
+            raise ValueError(f"a fitted range's minimum exceeds its maximum: {values}")
+
+    @classmethod
+    def of(cls, value: FittedRange | list | tuple) -> FittedRange:
+        if isinstance(value, FittedRange):
+            return value
+        if len(value) != len(RANGE_TERMS):
+            raise ValueError(f"a fitted range is [{', '.join(RANGE_TERMS)}], got {list(value)}")
+        return cls(*(float(v) for v in value))
+
+    def as_list(self) -> list[float]:
+        return [getattr(self, name) for name in RANGE_TERMS]
+
+    def outside(self, conditions: FilletConditions) -> str:
+        """Why the measured ``conditions`` lie outside the range ('' when inside; an unmeasured value is inside)."""
+        speed, turn, length = conditions.speed_mps, conditions.turn_deg, conditions.length_m
+        low, high = 1.0 - RANGE_SLACK, 1.0 + RANGE_SLACK
+        if not self.speed_min_mps * low <= speed <= self.speed_max_mps * high and math.isfinite(speed):
+            return _beyond("speed", f"{speed:.2f} m/s", f"{self.speed_min_mps:.2f}-{self.speed_max_mps:.2f} m/s")
+        if turn > self.turn_max_deg + TURN_SLACK_DEG:
+            return _beyond("turn", f"{turn:.0f} deg", f"0-{self.turn_max_deg:.0f} deg")
+        if not self.length_min_m * low <= length <= self.length_max_m * high and math.isfinite(length):
+            return _beyond("body length", f"{length:.3f} m", f"{self.length_min_m:.3f}-{self.length_max_m:.3f} m")
+        return ""
+
+
+def _beyond(what: str, measured: str, fitted: str) -> str:
+    return f"outside the calibration: measured {what} {measured}, the cuts were fitted on {fitted}"
+
+
+def fitted_range_of(conditions: list[FilletConditions]) -> FittedRange:
+    """The range a set of measured conditions spans (the rows a calibration fitted its cuts on)."""
+    speeds = [c.speed_mps for c in conditions if math.isfinite(c.speed_mps)]
+    turns = [c.turn_deg for c in conditions if math.isfinite(c.turn_deg)]
+    lengths = [c.length_m for c in conditions if math.isfinite(c.length_m)]
+    if not (speeds and turns and lengths):
+        raise ValueError("a fitted range needs rows with a measured speed, turn and length")
+    return FittedRange(min(speeds), max(speeds), max(turns), min(lengths), max(lengths))
 
 
 def is_woody_array(scores, threshold) -> np.ndarray:

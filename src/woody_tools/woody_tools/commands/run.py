@@ -137,6 +137,10 @@ def _add_grading_arguments(parser: argparse.ArgumentParser) -> None:
     grading.add_argument("--threshold", type=float, default=None, metavar="X",
                          help="a constant reject cut on the score in use (line: line_threshold [X, 0, 0, 0, 0]; paper: "
                               "threshold X); default the calibrated cuts of --calibration")
+    grading.add_argument("--grade-outside-calibration", action="store_true",
+                         help="grade fillets measured outside the speeds, turns and lengths the calibration's cuts "
+                              "were fitted on (the grader's grade_outside_calibration) on extrapolated cuts; by "
+                              "default they are unscored, so the gate diverts them")
     grading.add_argument("--gate-distance", type=float, default=GATE_DISTANCE_M, metavar="M",
                          help="distance from the roller edge to every lane's diverter, m (reject_gate's "
                               f"gate_distance_m; default {GATE_DISTANCE_M:g}): how long a verdict has to reach the "

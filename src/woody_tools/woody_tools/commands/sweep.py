@@ -31,6 +31,7 @@ from woody_experiments import cluster, runs_csv, sweep, sweep_report, traces
 from woody_experiments.conditions import SWEEP_CONDITIONS, TIDY
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import DEFAULT_MESHES, load_meshes
+from woody_experiments.run_report import uncalibrated_speed_note
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS
 from woody_sim.sensor_model import PRESETS
 from woody_tools import arguments
@@ -123,6 +124,10 @@ def run(args: argparse.Namespace) -> int:
           f"{len(args.conditions)} conditions = {len(runs)} runs "
           f"({len(runs) - len(todo)} already in {csv_path}, {len(todo)} to go), {args.lanes} lanes, "
           f"M = {mass:g} kg, top camera {args.top_camera}, on {where}", file=sys.stderr)
+    for fpm in args.speeds:
+        note = uncalibrated_speed_note(fpm, calibration.speed_range_fpm)
+        if note:
+            print(f"woody sweep: {note} (the report counts them unscored)", file=sys.stderr)
     failed = _evaluate_todo(args, todo, meshes, runs_file)
     if failed is None:
         return 2
