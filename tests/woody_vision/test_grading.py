@@ -89,14 +89,16 @@ RANGE = FittedRange(0.45, 0.72, 35.0, 0.15, 0.25)
     (FilletConditions(2.03, False, 10.0, 0.2), "measured speed 2.03 m/s, the cuts were fitted on 0.45-0.72 m/s"),
     (FilletConditions(0.30, False, 10.0, 0.2), "measured speed 0.30 m/s"),
     (FilletConditions(0.6, False, 44.0, 0.2), "measured turn 44 deg, the cuts were fitted on 0-35 deg"),
-    (FilletConditions(0.6, False, 10.0, 0.31), "measured body length 0.310 m"),
+    (FilletConditions(0.6, False, 10.0, 0.29), "measured body length 0.290 m"),
+    (FilletConditions(0.6, False, 10.0, 0.12), "measured body length 0.120 m"),
 ])
 def test_conditions_outside_the_fitted_range_say_which_and_where(conditions, says):
     assert RANGE.outside(conditions).startswith("outside the calibration: ") and says in RANGE.outside(conditions)
 
 
 def test_inside_within_the_measurement_slack_or_unmeasured_is_inside():
-    assert RANGE.outside(FilletConditions(0.74, True, 36.5, 0.26)) == ""
+    assert RANGE.outside(FilletConditions(0.74, True, 36.5, 0.28)) == ""
+    assert RANGE.outside(FilletConditions(0.43, True, 0.0, 0.13)) == ""
     assert RANGE.outside(FilletConditions(math.nan, False, math.nan, math.nan)) == ""
 
 

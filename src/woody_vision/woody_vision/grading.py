@@ -180,8 +180,12 @@ class GradingRules:
                               grade=self.grade(score, conditions), threshold=self.threshold.at(conditions))
 
 
-RANGE_SLACK = 0.05
-"""A measured speed or length may lie this fraction beyond the fitted range (the measurement's own error)."""
+SPEED_SLACK = 0.05
+"""A measured speed may lie this fraction beyond the fitted range (the measurement's own error)."""
+LENGTH_SLACK = 0.15
+"""A measured body length may lie this fraction beyond the fitted range: the calibration lays each of its meshes
+once per condition, so its lengths sample the line's size spread (x0.85-1.15 on a messy line) sparsely, and the
+cut's length term moves it by about 5 % per centimetre."""
 TURN_SLACK_DEG = 2.0
 """A measured turn may lie this far beyond the largest turn fitted (degrees)."""
 RANGE_TERMS = ("speed_min_mps", "speed_max_mps", "turn_max_deg", "length_min_m", "length_max_m")
@@ -220,11 +224,12 @@ class FittedRange:
     def outside(self, conditions: FilletConditions) -> str:
         """Why the measured ``conditions`` lie outside the range ('' when inside; an unmeasured value is inside)."""
         speed, turn, length = conditions.speed_mps, conditions.turn_deg, conditions.length_m
-        low, high = 1.0 - RANGE_SLACK, 1.0 + RANGE_SLACK
+        low, high = 1.0 - SPEED_SLACK, 1.0 + SPEED_SLACK
         if not self.speed_min_mps * low <= speed <= self.speed_max_mps * high and math.isfinite(speed):
             return _beyond("speed", f"{speed:.2f} m/s", f"{self.speed_min_mps:.2f}-{self.speed_max_mps:.2f} m/s")
         if turn > self.turn_max_deg + TURN_SLACK_DEG:
             return _beyond("turn", f"{turn:.0f} deg", f"0-{self.turn_max_deg:.0f} deg")
+        low, high = 1.0 - LENGTH_SLACK, 1.0 + LENGTH_SLACK
         if not self.length_min_m * low <= length <= self.length_max_m * high and math.isfinite(length):
             return _beyond("body length", f"{length:.3f} m", f"{self.length_min_m:.3f}-{self.length_max_m:.3f} m")
         return ""
