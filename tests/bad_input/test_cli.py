@@ -1,6 +1,7 @@
 """`woody report` never overwrites its input; a failed `woody run` can be retried as typed; a line speed outside
 the calibrated ones is said at the start and in report.md; `woody sweep --out` and `woody calibrate --out` naming a
-file are one line."""
+file are one line; a bad `woody evaluate` option, an --out of other settings and a cell woody run would refuse are
+one line before any run."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from pathlib import Path
 import pytest
 from conftest import REPO
 
-from bad_input.conftest import assert_one_clear_line, run_entry
+from bad_input.conftest import assert_one_clear_line, run_entries, run_entry
 from woody_tools.processes import entry_point
 
 pytestmark = pytest.mark.ros
@@ -122,3 +123,54 @@ def test_a_calibrate_out_that_is_a_file_is_one_line_before_any_work(tmp_path):
         outcome = run_entry("woody", "calibrate", "--skip-physics", "--out", out, domain=None, cwd=tmp_path)
         assert_one_clear_line(outcome, "woody calibrate", f"--out {out}: notes.txt is not a folder")
     assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"] and (tmp_path / "notes.txt").read_text() == "mine\n"
+
+
+EVALUATE_REFUSALS = {  # `woody evaluate` options: refused before any run starts or --out is made
+    ("--seeds", "3-1"): "--seeds must be like 1-8 or 1,2,3 with seeds 0..2147483647, got '3-1'",
+    ("--seeds", "0-20000"): "--seeds must name at most 10000 seeds, got '0-20000'",
+    ("--conditions", "tidy,rainy"): "--conditions must be among tidy,messy,crowded,gaps, got 'tidy,rainy'",
+    ("--lanes", "3,7"): "--lanes: every lane count must be a whole number 1..6, got 7",
+    ("--speeds", "100,500"): "--speeds: every speed must be within 1..400 FPM, got 500",
+    ("--k=0,nan",): "--k: every k must be a finite number >= 0, got nan",
+    ("--fillets", "0"): "--fillets must be 1..100000, got 0",
+    ("--timeout", "nan"): "--timeout must be a positive number of seconds, got nan",
+    ("--jobs", "0"): "--jobs must be at least 1, got 0",
+    ("--meshes", "/no/such/meshes"): "--meshes: mesh spec '/no/such/meshes': not 'builtin', 'generated:N[:SEED]', "
+                                     "a folder or a mesh file",
+}
+
+
+def test_bad_evaluate_options_are_one_line_and_make_no_folder():
+    commands = [("woody", "evaluate", "--out", "evaluation", *options) for options in EVALUATE_REFUSALS]
+    for outcome, message in zip(run_entries(commands, None, workers=2), EVALUATE_REFUSALS.values()):
+        assert assert_one_clear_line(outcome, "woody evaluate") == f"woody evaluate: {message}"
+        assert list(outcome.cwd.iterdir()) == []
+
+
+def test_an_evaluate_out_of_other_settings_or_a_file_is_one_line_and_left_alone(tmp_path):
+    (tmp_path / "evaluation").mkdir()
+    (tmp_path / "evaluation" / "evaluate.json").write_text('{"fillets": 6, "meshes": "builtin", "k": [0.0, 100.0]}')
+    (tmp_path / "notes.txt").write_text("mine\n")
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    refusals = {("--out", "evaluation", "--fillets", "12"): "--out evaluation holds runs with --fillets 6; use "
+                                                             "another --out for --fillets 12",
+                ("--out", "evaluation", "--k", "0,20"): "--out evaluation holds runs with --k 0,100; use another "
+                                                        "--out for --k 0,20",
+                ("--out", "notes.txt/evaluation"): "--out notes.txt/evaluation: notes.txt is not a folder"}
+    for options, message in refusals.items():
+        outcome = run_entry("woody", "evaluate", "--fillets", "6", *options, domain=None, cwd=tmp_path)
+        assert assert_one_clear_line(outcome, "woody evaluate") == f"woody evaluate: {message}"
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
+def test_an_evaluate_cell_woody_run_would_refuse_is_one_line_before_any_run(tmp_path):
+    import trimesh
+
+    (tmp_path / "meshes").mkdir()
+    trimesh.creation.box(extents=(0.11, 0.06, 0.02)).export(tmp_path / "meshes" / "short.obj")  # gaps: 0.138 m apart
+    outcome = run_entry("woody", "evaluate", "--meshes", str(tmp_path / "meshes"), "--conditions", "tidy,gaps",
+                        "--out", "evaluation", domain=None)
+    assert assert_one_clear_line(outcome, "woody evaluate") == (
+        "woody evaluate: woody run refuses the gaps line at 3 lanes and 100 FPM: --spacing must be within 0.15..10 m "
+        "(below 0.15 m every fillet overlaps the next), got 0.138")
+    assert list(outcome.cwd.iterdir()) == []

@@ -14,6 +14,7 @@ from woody_experiments.statistics import (
     finite,
     mean_sd,
     roc,
+    share_text,
     wilson_interval,
 )
 
@@ -44,3 +45,4 @@ def test_mean_sd_finite_and_wilson():
     low, high = wilson_interval(8, 10)
     assert 0.44 < low < 0.8 < high < 0.97
     assert all(math.isnan(v) for v in wilson_interval(0, 0))
+    assert share_text(8, 10) == "80.0 % (8/10; 49–94 %)" and share_text(0, 0) == "—"

@@ -16,6 +16,7 @@ from woody_sim.line_conditions import (
     draw_placement,
     line_preset,
     longest_placed_length,
+    mean_placed_length,
     place_mesh,
     placement_for,
 )
@@ -114,6 +115,13 @@ def test_longest_placed_length_bounds_every_placed_fillet():
     for i, placement in enumerate(placements(MESSY, 40)):
         assert place_mesh(meshes[i % 2], placement).length <= longest + 1e-9
     assert longest_placed_length(meshes, LineConditions()) == pytest.approx(max(m.length for m in meshes))
+
+
+def test_mean_placed_length_lies_between_the_mean_mesh_and_the_longest_placed_fillet():
+    meshes = [generate_fillet(s) for s in (0, 3)]
+    tidy = mean_placed_length(meshes, LineConditions())
+    assert tidy == pytest.approx(np.mean([m.length for m in meshes]))
+    assert tidy < mean_placed_length(meshes, MESSY) < longest_placed_length(meshes, MESSY)  # turns lengthen the box
 
 
 def test_lane_pitch_and_spawn_rate_limits_are_one_line():

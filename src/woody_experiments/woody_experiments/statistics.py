@@ -89,3 +89,11 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
     centre = (p + z * z / (2 * n)) / denom
     half = z / denom * math.sqrt(p * (1.0 - p) / n + z * z / (4 * n * n))
     return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def share_text(successes: int, n: int) -> str:
+    """A proportion with its count and 95 % Wilson interval, "91.7 % (22/24; 74–98 %)"; "—" for n = 0."""
+    if not n:
+        return "—"
+    lo, hi = wilson_interval(successes, n)
+    return f"{successes / n * 100:.1f} % ({successes}/{n}; {lo * 100:.0f}–{hi * 100:.0f} %)"

@@ -141,12 +141,29 @@ def place_mesh(mesh: FilletMesh, placement: FilletPlacement) -> FilletMesh:
     return yawed(sized, turn) if turn else sized
 
 
+def placed_extent(mesh: FilletMesh, yaw_deg: float, scale: float = 1.0) -> float:
+    """Extent (m) along the flow of the mesh's footprint box turned by ``yaw_deg`` and sized by ``scale``: an upper
+    bound of the placed fillet's (a blunt-first end swap leaves it unchanged)."""
+    turn = math.radians(abs(yaw_deg))
+    return scale * (mesh.length * math.cos(turn) + mesh.width * math.sin(turn))
+
+
 def longest_placed_length(meshes: list[FilletMesh], conditions: LineConditions) -> float:
     """Upper bound (m) of a placed fillet's extent along the flow: its footprint box at the largest size, turned
     by the yaw within the bound that lengthens it most (what in-lane spacing must exceed for fillets not to
     overlap)."""
     def extent(mesh: FilletMesh) -> float:
-        turn = min(math.radians(conditions.yaw_max_deg), math.atan2(mesh.width, mesh.length))
-        return mesh.length * math.cos(turn) + mesh.width * math.sin(turn)
+        return placed_extent(mesh, min(conditions.yaw_max_deg, math.degrees(math.atan2(mesh.width, mesh.length))))
 
     return conditions.scale_max * max((extent(m) for m in meshes), default=0.0)
+
+
+MEAN_PLACEMENT_DRAWS = 1000
+"""Placements (seed 0, the first spawn indices) that :func:`mean_placed_length` averages over."""
+
+
+def mean_placed_length(meshes: list[FilletMesh], conditions: LineConditions) -> float:
+    """Mean extent (m) along the flow of a placed fillet: every mesh's footprint box under each of
+    MEAN_PLACEMENT_DRAWS placements line_sim would draw (what in-lane spacing exceeds by the mean gap)."""
+    placements = [placement_for(conditions, 0, index) for index in range(MEAN_PLACEMENT_DRAWS)]
+    return float(np.mean([placed_extent(m, p.yaw_deg, p.scale) for m in meshes for p in placements]))

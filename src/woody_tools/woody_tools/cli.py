@@ -13,6 +13,8 @@ SUBCOMMANDS = [
     ("bag", "bag", "`woody bag info BAG`, `woody bag recover IN OUT` (rescue a recording cut short)"),
     ("bench", "bench", "benchmarks: `woody bench sim`, `woody bench vision`, `woody bench graph`"),
     ("sweep", "sweep", "the paper's drop-test grid (meshes x k x speed), parallel and resumable; runs.csv, results.md"),
+    ("evaluate", "evaluate", "the live line over a grid of seeds x conditions x lanes x speeds, one woody run each, "
+                             "resumable; evaluation.md, evaluation.csv"),
     ("meshes", "meshes",
      "mesh sets: `woody meshes stats SPEC...` prints shape descriptors per mesh and per set"),
     ("calibrate", "calibrate", "fit M, c and the drive friction to the paper's side view, choose the Φ threshold; "
