@@ -130,6 +130,18 @@ def test_a_piece_split_off_past_the_edge_gets_no_verdict_but_a_fillet_appearing_
     assert alone.label == "unscored" and alone.shape.reason == REASON_STARTED_PAST_EDGE
 
 
+def test_a_fillet_first_seen_past_the_edge_beside_its_lane_neighbour_gets_its_unscored_verdict():
+    """A fillet hidden in its neighbour's blob until the edge is not a piece: the gate must hear of it."""
+    grader = FilletGrader(EDGE, GradingRules(threshold=1.0))
+    shapes = contours(90)
+    for i, contour in enumerate(shapes[:30]):
+        assert grader.on_tracks(i / FPS, [TrackObservation(1, 0, contour)]) == []
+    hidden = contours(1, start_tip_v=EDGE + 60.0)[0]  # a whole fillet's outline, already past the edge
+    (verdict,) = grader.on_tracks(30 / FPS, [TrackObservation(1, 0, shapes[30]), TrackObservation(2, 0, hidden)])
+    assert verdict.fillet_id == 2 and verdict.label == "unscored" and verdict.shape.reason == REASON_STARTED_PAST_EDGE
+    assert grader.fragments == 0
+
+
 def test_a_track_seen_only_twice_then_lost_gives_no_verdict():
     grader = FilletGrader(EDGE)
     assert feed(grader, 4, 0, contours(2), end=True) == [] and grader.tentative == 1

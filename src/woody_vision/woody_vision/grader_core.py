@@ -24,6 +24,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 
+import cv2
 import numpy as np
 
 from woody_common.calibration import resolved_calibration
@@ -124,6 +125,10 @@ def check_score(score: str) -> str:
         raise ValueError(f"score must be one of {', '.join(SCORES)}, got {score!r}")
     return score
 
+PIECE_AREA_RATIO = 0.5
+"""A track first seen past the edge is a split-off piece of its lane's fillet when its blob is smaller than this
+fraction of that fillet's flat outline (:meth:`FilletGrader._is_piece`)."""
+
 MIN_SIGHTINGS = 3
 """Frames a track must be seen in before its end gives a verdict."""
 
@@ -161,7 +166,7 @@ class FilletGrader:
         ShapeEvaluator(self.edge_row, **self.evaluator_options)  # validate options now
         self._forget()
         self.fragments = 0
-        """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_lane_has_approached`)."""
+        """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_is_piece`)."""
         self.tentative = 0
         """Tracks that ended after fewer than MIN_SIGHTINGS frames (a fillet's first sightings at the image border
         before a burst of lost frames, noise): no verdict, like a tentative track in SORT-style trackers."""
@@ -197,7 +202,7 @@ class FilletGrader:
                 evaluator = self._evaluators[track.track_id] = ShapeEvaluator(self.edge_row, **self.evaluator_options)
             result = evaluator.update(track.contour, stamp)
             if result is not None:  # a finished evaluator stays until its track ends: one verdict per track
-                decided += self._decide(track.track_id, result)
+                decided += self._decide(track.track_id, result, _area(track.contour))
         for track_id in ended_ids:
             evaluator = self._evaluators.pop(track_id, None)
             result = evaluator.finish() if evaluator is not None else None
@@ -243,9 +248,9 @@ class FilletGrader:
         self._pending = keep
         return out
 
-    def _decide(self, track_id: int, result: ShapeResult) -> list[GradedFillet]:
+    def _decide(self, track_id: int, result: ShapeResult, area_px: float = 0.0) -> list[GradedFillet]:
         lane = self._lanes.get(track_id, -1)
-        if result.reason == REASON_STARTED_PAST_EDGE and self._lane_has_approached(lane, track_id):
+        if result.reason == REASON_STARTED_PAST_EDGE and self._is_piece(lane, track_id, area_px):
             self.fragments += 1
             return []
         graded = self._classify(track_id, lane, result)
@@ -271,15 +276,18 @@ class FilletGrader:
         return GradedFillet(track_id, lane, result, decision.label, decision.grade or "", score=score,
                             conditions=conditions, threshold=decision.threshold)
 
-    def _lane_has_approached(self, lane: int, track_id: int) -> bool:
-        """Whether another live track of ``lane`` was seen flat before the edge.
+    def _is_piece(self, lane: int, track_id: int, area_px: float) -> bool:
+        """Whether a track that first appears past the edge is a piece of a fillet already being graded.
 
-        A track that first appears past the edge next to such a fillet is a
-        piece of it split off by the segmentation (a noisy camera's tip going
-        over the edge), not a fillet of its own: it gets no verdict, so the
-        gate and the sweep hear only the whole fillet's.
+        A noisy camera's tip going over the edge splits off a small piece next
+        to a fillet of the same lane that was seen flat before the edge: it
+        gets no verdict, so the gate and the sweep hear only the whole fillet's.
+        A blob of at least PIECE_AREA_RATIO of that fillet's flat area is a
+        fillet of its own that was hidden in a neighbour's blob until the edge:
+        it gets its unscored verdict, so the gate diverts it.
         """
         return any(self._lanes.get(other) == lane and evaluator.referenced
+                   and area_px < PIECE_AREA_RATIO * evaluator.reference_area
                    for other, evaluator in self._evaluators.items() if other != track_id)
 
     def _match_side(self, closing: float) -> SideMeasurement | None:
@@ -288,3 +296,6 @@ class FilletGrader:
                 return self._side.pop(i)
         return None
 
+
+def _area(contour: np.ndarray) -> float:
+    return float(cv2.contourArea(np.asarray(contour, dtype=np.int32).reshape(-1, 1, 2)))

@@ -388,6 +388,11 @@ class ShapeEvaluator:
         return frames[-1] if frames else None
 
     @property
+    def reference_area(self) -> float:
+        """Area (px²) of the flat outline the reference was made from (NaN before it is locked)."""
+        return self._reference_area
+
+    @property
     def referenced(self) -> bool:
         """True once the fillet was seen flat before the edge and its reference is locked."""
         return self._reference is not None
