@@ -67,12 +67,12 @@ def test_a_report_into_the_sources_folder_is_refused(tmp_path, source):
 
 
 def bad_calibration(tmp_path: Path) -> Path:
-    """A calibration woody run reads but the grader refuses (its severe cut above the moderate one)."""
+    """A calibration woody run reads but the grader refuses (its severe cut above the reject cut)."""
     import yaml
 
     data = yaml.safe_load((REPO / "config" / "calibration.yaml").read_text())
     grader = data["/**/grader"]["ros__parameters"]
-    grader["severe_threshold"], grader["moderate_threshold"] = grader["moderate_threshold"], grader["severe_threshold"]
+    grader["severe_threshold"], grader["line_threshold"] = grader["line_threshold"], grader["severe_threshold"]
     path = tmp_path / "bad-calibration.yaml"
     path.write_text(yaml.safe_dump(data))
     return path

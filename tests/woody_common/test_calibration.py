@@ -16,7 +16,7 @@ from woody_common.calibration import (
     write_calibration,
 )
 
-GRADER = ("threshold", "line_threshold", "moderate_threshold", "severe_threshold", "fitted_range")
+GRADER = ("threshold", "line_threshold", "severe_threshold", "fitted_range")
 
 
 @pytest.fixture
@@ -62,7 +62,7 @@ def test_write_then_read_round_trips_and_follows_a_link(tmp_path, no_env):
 
 def test_node_defaults_read_no_file_when_the_params_file_gives_them(tmp_path, monkeypatch):
     monkeypatch.setenv(ENV_VAR, str(tmp_path / "absent.yaml"))  # any read would raise
-    given = {"threshold": 11, "line_threshold": [7, 0, 0, 0, 0], "moderate_threshold": [9.0, 0, 0, 0, 0],
+    given = {"threshold": 11, "line_threshold": [7, 0, 0, 0, 0],
              "severe_threshold": [5.0, 0, 0, 0, 0], "fitted_range": [0.4, 0.8, 40, 0.1, 0.3], "lanes": 3}
     defaults = node_defaults("grader", given)
     assert set(defaults) == set(GRADER)

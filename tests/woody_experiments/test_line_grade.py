@@ -47,7 +47,11 @@ def test_a_fitted_cut_follows_speed_and_leading_end_between_the_classes():
     runs = line_grade.graded_runs(rows, rules)
     summary = line_grade.summarise(runs)
     assert summary.right == summary.total == 80 and summary.severe_passed == 0 and summary.auc == 1.0
-    assert summary.grade_right == summary.grade_total == 200
+    # the grade refines the verdict: a moderate fillet the reject cut passes grades normal
+    assert all((r.grade == "normal") == (r.label == "normal") for r in runs)
+    assert summary.confusion[("normal", "normal")] == 40 and summary.confusion[("severe", "severe")] == 80
+    moderate = [r for r in runs if line_grade.true_grade(r.k) == "moderate"]
+    assert summary.confusion[("moderate", "moderate")] == sum(r.label == "woody" for r in moderate) > 0
 
 
 def test_a_cut_needs_rows_on_both_sides():

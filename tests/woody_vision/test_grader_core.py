@@ -85,7 +85,7 @@ def test_one_verdict_per_track_even_with_frames_after_the_window_closed():
 
 
 def test_classification_follows_the_rules():
-    rules = GradingRules(threshold=1.0, moderate_threshold=3.0, severe_threshold=0.5)
+    rules = GradingRules(threshold=1.0, severe_threshold=0.5)
     grader = FilletGrader(EDGE, rules)
     ((_, flexible),) = feed(grader, 1, 0, contours(90, bend=0.4))
     ((_, stiff),) = feed(grader, 2, 2, contours(90))

@@ -364,6 +364,17 @@ def test_a_blunt_first_fillet_is_measured_at_the_same_overhang_after_its_window_
     assert leading_end(contours[0]) == LEADING_BLUNT and leading_end(translating(1)[0]) == LEADING_NARROW
 
 
+@pytest.mark.parametrize("turn", [-45, -40, -32, 0, 32, 40, 45])
+@pytest.mark.parametrize("narrow_first", [True, False])
+def test_the_leading_end_is_read_along_the_fillets_own_axis_up_to_the_largest_turn(turn, narrow_first):
+    """A wide fillet turned 40 degrees: image rows cut across both ends, its long axis does not."""
+    outline = teardrop_polygon((300.0, 200.0), 100.0, 70.0, tip_down=narrow_first)
+    angle = math.radians(turn)
+    rotation = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    turned = np.round((outline - (300.0, 200.0)) @ rotation.T + (300.0, 200.0)).astype(np.int32)
+    assert leading_end(turned) == (LEADING_NARROW if narrow_first else LEADING_BLUNT)
+
+
 def merged_with_follower(contour: np.ndarray, gap_px: int = 0) -> np.ndarray:
     """The blob of a fillet and an identical follower touching it from behind, as one contour."""
     mask = np.zeros((800, 800), np.uint8)

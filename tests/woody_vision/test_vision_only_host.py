@@ -45,7 +45,7 @@ BLOCKED_START = textwrap.dedent("""
 """)
 
 THRESHOLD = 9.75
-CUTS = {"line_threshold": [6.5, -1.0, -0.25, 0.0, 0.0], "moderate_threshold": [8.0, -1.0, -0.25, 0.0, 0.0],
+CUTS = {"line_threshold": [6.5, -1.0, -0.25, 0.0, 0.0],
         "severe_threshold": [5.0, -1.0, -0.25, 0.0, 0.0], "fitted_range": [0.4, 0.8, 40.0, 0.1, 0.3]}
 
 

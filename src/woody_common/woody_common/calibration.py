@@ -39,11 +39,11 @@ PACKAGE_DATA = ("woody_common.config", "calibration.yaml")
 _SECTIONS = {"line_sim": {"total_mass_kg": "mass", "hinge_damping": "damping", "friction_static": "friction_static",
                           "friction_dynamic": "friction_dynamic"},
              "grader": {"phi_threshold": "threshold", "line_threshold": "line_threshold",
-                        "moderate_threshold": "moderate_threshold", "severe_threshold": "severe_threshold",
+                        "severe_threshold": "severe_threshold",
                         "fitted_range": "fitted_range"}}
 """Per node: dataclass field -> the node's parameter name."""
 _PROVENANCE = "woody_calibration"
-CUT_FIELDS = ("line_threshold", "moderate_threshold", "severe_threshold")
+CUT_FIELDS = ("line_threshold", "severe_threshold")
 """Fields that are cuts (``CUT_LENGTH`` numbers each) rather than single values."""
 CUT_LENGTH = 5
 """Numbers per cut (woody_vision.grading.CUT_TERMS; woody_common cannot import woody_vision)."""
@@ -69,8 +69,6 @@ class Calibration:
     line_threshold: tuple[float, ...]
     """The line's reject cut on ``line_phi``: [base, speed_slope, blunt_offset, turn_slope, length_slope]
     (woody_vision.grading.Cut)."""
-    moderate_threshold: tuple[float, ...]
-    """The grade's normal/moderate cut on ``line_phi``, same form."""
     severe_threshold: tuple[float, ...]
     """The grade's moderate/severe cut on ``line_phi``, same form."""
     fitted_range: tuple[float, ...]

@@ -146,7 +146,7 @@ def choose_line_cuts(cal_names: list[str], test_names: list[str], physics: dict,
     fitted = line_grade.fitted_range(cal_rows)
     print(f"woody calibrate: fitted range {fitted.speed_min_mps:.3f}-{fitted.speed_max_mps:.3f} m/s, turns up to "
           f"{fitted.turn_max_deg:.1f} deg, bodies {fitted.length_min_m:.3f}-{fitted.length_max_m:.3f} m")
-    cuts = {"line_threshold": rules.threshold, "moderate_threshold": rules.moderate_threshold,
+    cuts = {"line_threshold": rules.threshold,
             "severe_threshold": rules.severe_threshold}
     for name, cut in cuts.items():
         print(f"woody calibrate: {name} = {cut.base:.3g} at 100 FPM narrow end first, "

@@ -1,10 +1,13 @@
-"""Fitting the line's grade: the reject cut and the three-class cuts on ``line_phi``, from experiment rows.
+"""Fitting the line's grade: the reject cut and the severe cut on ``line_phi``, from experiment rows.
 
 Classes by hinge stiffness k (N m/rad): normal k = 0, moderate 0 < k < 40,
 severe k >= 40. The split is where the line score separates: at 100 FPM the
 k = 10 and 20 fillets score between the normal and the k >= 40 ones, while k
 40 and 100 overlap each other. The reject cut separates normal (k = 0) from
-severe k = 100 fillets, the paper's two classes.
+severe k = 100 fillets, the paper's two classes, with a margin to both; the
+three-class grade refines that decision (woody_vision.grading.GradingRules),
+so the moderate fillets it passes grade normal: the reject cut lies inside the
+moderate class's scores, and the three-class figures say so.
 
 Each cut is fitted between an upper (more compliant) and a lower class: per
 class a least-squares fit of ln(score) on the measured conditions
@@ -93,13 +96,13 @@ def fitted_range(rows: Sequence[dict]) -> FittedRange:
 
 
 def fit_rules(rows: Sequence[dict]) -> GradingRules:
-    """The reject cut (k = 0 vs k = 100) and the grade's two cuts, from scored rows of several k."""
+    """The reject cut (k = 0 vs k = 100, also the grade's normal/moderate boundary) and the grade's
+    moderate/severe cut, from scored rows of several k."""
     rows = scored(rows)
     by_grade = {g: [r for r in rows if true_grade(r["k"]) == g] for g in GRADES}
     reject = fit_cut(by_grade[GRADE_NORMAL], [r for r in rows if r["k"] == SEVERE_K])
-    moderate = fit_cut(by_grade[GRADE_NORMAL], by_grade[GRADE_MODERATE])
     severe = fit_cut(by_grade[GRADE_MODERATE], by_grade[GRADE_SEVERE])
-    return GradingRules(reject, moderate, severe)
+    return GradingRules(reject, severe)
 
 
 @dataclass(frozen=True)

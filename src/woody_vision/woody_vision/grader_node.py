@@ -176,7 +176,6 @@ class Grader(Node):
             ("line_threshold", "With score line: the reject cut on line_phi, [base at 100 FPM, narrow end first, "
              "straight, 0.19 m long; d ln(cut)/d speed per m/s; ln offset blunt end first; d ln(cut)/d turn per "
              "degree; d ln(cut)/d length per m]; the default is the calibrated one."),
-            ("moderate_threshold", "With score line: line_phi below this cut grades at least moderate (same form)."),
             ("severe_threshold", "With score line: line_phi below this cut grades severe (same form)."))]
         fitted = FittedRange.of(declare(self, "fitted_range", defaults["fitted_range"], "The measured conditions "
                                         "the cuts were fitted on, [speed min, speed max (m/s), turn max (degrees), "
@@ -309,7 +308,7 @@ class Grader(Node):
             rejected_frames=shape.rejected_frames, phi=_finite_or_nan(shape.phi),
             hu_term=_finite_or_nan(shape.hu_term), solidity_term=_finite_or_nan(shape.solidity_term),
             threshold=self.rules.threshold.at(conditions), frames_in_window=shape.frames,
-            moderate_threshold=self.rules.grade_moderate_threshold.at(conditions) if self.rules.severe_threshold
+            moderate_threshold=self.rules.threshold.at(conditions) if self.rules.severe_threshold
             else nan, severe_threshold=self.rules.severe_threshold.at(conditions) if self.rules.severe_threshold
             else nan)
         msg.header.stamp = seconds_to_stamp(shape.stamp if shape.stamp is not None else self.core.now)

@@ -14,14 +14,13 @@ L_ref 0.19 m. A fillet drapes less at a higher speed (it leaves the roller in
 a flatter arc), a blunt leading end bends less than a tapered one, and a
 turned fillet crosses the edge corner first, for normal and woody meat
 alike, so one constant cut cannot fit a line whose speed and fillets vary.
-Unknown measurements (NaN) count as the reference values. `woody calibrate` fits three
-cuts: the reject cut (normal vs severe) and the grade's normal/moderate and
-moderate/severe cuts. A constant cut (both slopes 0) is the paper's single
+Unknown measurements (NaN) count as the reference values. `woody calibrate`
+fits two cuts: the reject cut (normal vs severe) and the grade's
+moderate/severe cut. A constant cut (every slope 0) is the paper's single
 threshold.
 
-The three-way grade uses its own two cuts, independent of the reject cut:
-'normal' at or above the moderate cut, 'moderate' between, 'severe' below the
-severe cut.
+The three-way grade refines the reject decision: 'normal' at or above the reject
+cut, 'moderate' between it and the severe cut, 'severe' below the severe cut.
 """
 
 from __future__ import annotations
@@ -131,32 +130,29 @@ class Classification:
 
 @dataclass(frozen=True)
 class GradingRules:
-    """Cuts on the shape score (numbers or :class:`Cut`); validated on construction."""
+    """Cuts on the shape score (numbers or :class:`Cut`); validated on construction.
+
+    The grade refines the reject decision, never contradicts it: a fillet the
+    reject cut passes grades normal; one it diverts grades moderate, or severe
+    below the severe cut. A gate and a person reading the grade hear one story.
+    """
 
     threshold: Cut
-    """The reject cut; the calibrated one is in config/calibration.yaml (`woody calibrate`)."""
-    moderate_threshold: Cut | None = None
+    """The reject cut, also the grade's normal/moderate boundary; the calibrated one is in config/calibration.yaml
+    (`woody calibrate`)."""
     severe_threshold: Cut | None = None
+    """The grade's moderate/severe boundary, below the reject cut; None: no grade."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "threshold", Cut.of(self.threshold))
-        if self.moderate_threshold is not None and self.severe_threshold is None:
-            raise ValueError("moderate_threshold needs severe_threshold as well: the grade has two boundaries")
         if self.severe_threshold is None:
             return
         object.__setattr__(self, "severe_threshold", Cut.of(self.severe_threshold))
-        if self.moderate_threshold is not None:
-            object.__setattr__(self, "moderate_threshold", Cut.of(self.moderate_threshold))
         for conditions in (TIDY, FilletConditions(blunt_first=True)):
-            if not self.severe_threshold.at(conditions) < self.grade_moderate_threshold.at(conditions):
+            if not self.severe_threshold.at(conditions) < self.threshold.at(conditions):
                 raise ValueError(
-                    f"severe_threshold ({self.severe_threshold.at(conditions):g}) must be below the moderate "
-                    f"boundary ({self.grade_moderate_threshold.at(conditions):g}): severe fillets score lower")
-
-    @property
-    def grade_moderate_threshold(self) -> Cut:
-        """The effective normal/moderate cut (``moderate_threshold`` or ``threshold``)."""
-        return self.threshold if self.moderate_threshold is None else self.moderate_threshold
+                    f"severe_threshold ({self.severe_threshold.at(conditions):g}) must be below the reject cut "
+                    f"({self.threshold.at(conditions):g}): severe fillets score lower")
 
     def is_woody(self, score: float, conditions: FilletConditions = TIDY) -> bool:
         """True when the score is strictly below the reject cut for these conditions (:func:`is_woody_array`)."""
@@ -168,11 +164,9 @@ class GradingRules:
         _require_finite_score(score)
         if self.severe_threshold is None:
             return None
-        if score < self.severe_threshold.at(conditions):
-            return GRADE_SEVERE
-        if score < self.grade_moderate_threshold.at(conditions):
-            return GRADE_MODERATE
-        return GRADE_NORMAL
+        if not self.is_woody(score, conditions):
+            return GRADE_NORMAL
+        return GRADE_SEVERE if score < self.severe_threshold.at(conditions) else GRADE_MODERATE
 
     def classify(self, score: float, conditions: FilletConditions = TIDY) -> Classification:
         """Reject label, optional grade and the reject cut applied."""

@@ -277,15 +277,25 @@ class ShapeResult:
 
 
 def leading_end(contour: np.ndarray) -> str:
-    """'blunt' when the leading quarter of the outline (max v) is wider on average than the trailing quarter.
+    """'blunt' when the leading quarter of the outline holds more area than the trailing quarter.
 
-    A fillet's narrow (tapered) end is the one with less surface; measured on
-    the flat reference outline, the comparison holds for turned fillets too.
+    A fillet's narrow (tapered) end is the one with less surface. The quarters
+    are taken along the outline's own long axis, pointed downstream (+v), not
+    along the image rows: a fillet turned 30-45 degrees has rows that cut
+    across both ends, and a row-wise comparison reads some narrow-first
+    fillets as blunt first.
     """
     mask, _, _ = fill_rows(contour)
-    widths = np.count_nonzero(mask, axis=1)
-    quarter = max(1, len(widths) // 4)
-    return LEADING_BLUNT if widths[-quarter:].mean() > widths[:quarter].mean() else LEADING_NARROW
+    rows, columns = np.nonzero(mask)
+    points = np.stack([columns, rows], axis=1).astype(float)
+    points -= points.mean(axis=0)
+    eigenvalues, eigenvectors = np.linalg.eigh(points.T @ points)
+    axis = eigenvectors[:, np.argmax(eigenvalues)]
+    along = points @ (axis if axis[1] >= 0.0 else -axis)
+    quarter = 0.25 * (along.max() - along.min())
+    leading = np.count_nonzero(along >= along.max() - quarter)
+    trailing = np.count_nonzero(along <= along.min() + quarter)
+    return LEADING_BLUNT if leading > trailing else LEADING_NARROW
 
 
 def interpolate_at(frames: list[FrameScore], fraction: float) -> tuple[float, int | None, float]:
