@@ -5,9 +5,11 @@ empty-belt background is learned from the first frames (publish on
 ~/reset_background to relearn it); every bad frame is skipped with one log
 line so a camera hiccup never takes the node down or corrupts its tracks.
 With ``color_threshold`` > 0 the outline comes from the registered colour
-frame of the same stamp (a depth frame waits for it until the next depth
-frame arrives; one whose colour never came is skipped like a lost frame, so
-no depth-only outline, which is another shape, enters a fillet's score).
+frame nearest the depth frame's stamp within ``color_sync_tolerance_s``
+(woody_vision.frame_pairing; a depth frame waits for it at most until two more
+depth frames arrive; one without such a colour frame is skipped like a lost
+frame, so no depth-only outline, which is another shape, enters a fillet's
+score).
 When sim time goes back (/clock or the depth stamps; a replay started again,
 a restarted camera or line) the background is relearned and every track
 dropped, with one log line, so a second pass is segmented like the first.
@@ -37,11 +39,12 @@ from woody_common.line import (
     TOP_CAMERA_HEIGHT_M,
 )
 from woody_common.ros_params import declare, run_node
-from woody_common.stamps import stamp_to_seconds
+from woody_common.stamps import stamp_to_nanoseconds, stamp_to_seconds
 from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 from woody_vision import segmentation
 from woody_vision.camera_model import LaneLayout
 from woody_vision.frame_checks import FrameChecker, FrameError, SimTimeWatch, watch_clock
+from woody_vision.frame_pairing import FramePairing, Pair
 from woody_vision.image_encodings import color_rgb, depth_metres, match_size
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.segmentation import DEFAULT_HEIGHT_THRESHOLD_M, BackgroundModel, SegmentationParams, segment_depth
@@ -70,6 +73,9 @@ class Segmenter(Node):
             color_search_px=declare(self, "color_search_px", 8, "Colour refines the outline only this close to the "
                                     "depth mask (px).", 0, 100),
         )
+        sync = declare(self, "color_sync_tolerance_s", 0.0, "With color_threshold: a depth frame takes the colour "
+                       "frame nearest its stamp within this (s); 0 = half the depth stream's frame interval, measured "
+                       "(median of its recent stamp steps), so it fits a camera of any rate.", 0.0, 1.0)
         self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
         self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Lane centre to centre (m).", *LANE_PITCH_RANGE_M)
         self.max_fillet_width = declare(self, "max_fillet_width_m", MAX_FILLET_WIDTH_M, "A blob wider across the "
@@ -93,10 +99,7 @@ class Segmenter(Node):
         self.latest_color: Image | None = None
         self.scores: dict[int, str] = {}
         self.info_size: tuple[int, int] | None = None
-        self.colors: dict[tuple[int, int], Image] = {}
-        """Recent colour frames by stamp, for the depth frame of the same stamp."""
-        self.pending: tuple[Image, np.ndarray] | None = None
-        """A depth frame waiting for its colour frame."""
+        self.pairing = FramePairing(sync) if self.params.color_threshold else None  # None: depth only, never waits
         self.without_color = 0
 
         sensor = declare_image_qos(self)
@@ -131,15 +134,9 @@ class Segmenter(Node):
         if self.sim_time.went_back("color", stamp):  # colour comes before its depth frame: forget before keeping it
             self.restart(f"{topics.TOP_COLOR_IMAGE} stamp went back to {stamp:.2f} s")
         self.latest_color = msg
-        if not self.params.color_threshold:
-            return
-        key = _stamp_key(msg)
-        self.colors[key] = msg
-        while len(self.colors) > COLOR_FRAMES_KEPT:
-            self.colors.pop(next(iter(self.colors)))
-        if self.pending is not None and _stamp_key(self.pending[0]) == key:
-            pending, self.pending = self.pending, None
-            self._segment(*pending)
+        if self.pairing is not None:
+            for pair in self.pairing.add_color(stamp_to_nanoseconds(msg.header.stamp), msg):
+                self._segment(pair)
 
     def on_verdict(self, msg: FilletVerdict) -> None:
         verdict = {FilletVerdict.CLASS_NORMAL: "normal", FilletVerdict.CLASS_WOODY: "woody"}
@@ -161,30 +158,30 @@ class Segmenter(Node):
             return
         if self.checker.restarted:
             self.restart(f"the depth image size changed to {msg.width}x{msg.height}")
-        if self.params.color_threshold and _stamp_key(msg) not in self.colors:
-            if self.pending is not None:  # its colour frame never came: skipped
-                self._segment(*self.pending)
-            self.pending = (msg, depth)
+        if self.pairing is None:  # depth only: never waits for colour
+            self._segment(Pair((msg, depth), None))
             return
-        self._segment(msg, depth)
+        for pair in self.pairing.add_depth(stamp_to_nanoseconds(msg.header.stamp), (msg, depth)):
+            self._segment(pair)
 
     def restart(self, why: str) -> None:
         """The camera restarted or sim time went back: relearn the background, drop every track and held frame."""
         self.background.reset()
         self.checker.reset()
-        self.pending = None
-        self.colors.clear()
+        if self.pairing is not None:
+            self.pairing.clear()
         self.scores.clear()
         if self.tracker is not None:
             self.tracker.reset()
         self.get_logger().warning(f"camera restarted or sim time went back ({why}): relearning the background, "
                                   "tracks start over")
 
-    def _segment(self, msg: Image, depth: np.ndarray) -> None:
+    def _segment(self, pair: Pair) -> None:
         """Segment and track one depth frame (with its colour frame, when the outline comes from colour)."""
-        color = self._color_for(msg, depth.shape)
+        msg, depth = pair.depth
+        color = self._color_of(pair, depth.shape)
         out = FilletTrackArray(header=msg.header, image_width=msg.width, image_height=msg.height)
-        if self.params.color_threshold and color is None:
+        if self.pairing is not None and color is None:
             self.tracks_pub.publish(out)  # answered (a paced line_sim waits for it), but nothing tracked
             return
         if not self.background.ready or self.tracker is None:
@@ -207,17 +204,16 @@ class Segmenter(Node):
                 contour_uv=array.array("i", blob.contour.astype(np.int32).tobytes())))
         self.tracks_pub.publish(out)
         if self.debug_pub is not None:
-            self._publish_debug(msg, update.active)
+            self._publish_debug(msg, update.active, pair.color)
 
-    def _color_for(self, msg: Image, shape: tuple[int, ...]) -> np.ndarray | None:
-        """The colour frame of the depth frame's stamp at its size, or None (a throttled warning) without one."""
-        if not self.params.color_threshold:
+    def _color_of(self, pair: Pair, shape: tuple[int, ...]) -> np.ndarray | None:
+        """The pair's colour frame at the depth frame's size, or None (a throttled warning) without one."""
+        if self.pairing is None:
             return None
-        color_msg = self.colors.pop(_stamp_key(msg), None)
         try:
-            if color_msg is not None:
-                return match_size(color_rgb(color_msg), shape[0], shape[1])
-            reason = "no colour frame with this depth frame's stamp"
+            if pair.color is not None:
+                return match_size(color_rgb(pair.color), shape[0], shape[1])
+            reason = pair.reason
         except FrameError as exc:
             reason = str(exc)
         self.without_color += 1
@@ -231,19 +227,21 @@ class Segmenter(Node):
             raise FrameError(f"depth image {msg.width}x{msg.height} does not match its camera_info "
                              f"{self.info_size[0]}x{self.info_size[1]}: K would be wrong; frame skipped")
 
-    def _debug_canvas(self, depth_msg: Image) -> np.ndarray:
-        """The colour frame of the same stamp at the depth image's size, or black when there is none."""
+    def _debug_canvas(self, depth_msg: Image, paired: Image | None) -> np.ndarray:
+        """The depth frame's colour frame (its pair with the colour outline, else the latest one of the same stamp)
+        at the depth image's size, or black when there is none."""
         blank = np.zeros((depth_msg.height, depth_msg.width, 3), np.uint8)
-        if self.latest_color is None or self.latest_color.header.stamp != depth_msg.header.stamp:
+        color = paired if paired is not None else self.latest_color
+        if color is None or (paired is None and color.header.stamp != depth_msg.header.stamp):
             return blank
         try:
-            return match_size(color_rgb(self.latest_color), depth_msg.height, depth_msg.width).copy()
+            return match_size(color_rgb(color), depth_msg.height, depth_msg.width).copy()
         except FrameError as exc:
             self.checker.reject(f"debug image: {exc}")
             return blank
 
-    def _publish_debug(self, depth_msg: Image, tracks) -> None:
-        canvas = self._debug_canvas(depth_msg)
+    def _publish_debug(self, depth_msg: Image, tracks, paired: Image | None) -> None:
+        canvas = self._debug_canvas(depth_msg, paired)
         for track in tracks:
             colour = (0, 255, 0) if track.unseen == 0 else (255, 160, 0)
             cv2.polylines(canvas, [track.blob.contour.reshape(-1, 1, 2)], True, colour, 1)
@@ -255,16 +253,13 @@ class Segmenter(Node):
 
     def close(self) -> None:
         print(f"[segmenter] {self.frames} depth frames received, {self.checker.rejected} rejected"
-              + (f", {self.without_color} skipped without their colour frame" if self.params.color_threshold else ""),
-              flush=True)
+              + (self._pairing_summary() if self.pairing is not None else ""), flush=True)
 
-
-COLOR_FRAMES_KEPT = 10
-"""Colour frames kept for the depth frames of their stamps (colour usually arrives just before its depth)."""
-
-
-def _stamp_key(msg: Image) -> tuple[int, int]:
-    return msg.header.stamp.sec, msg.header.stamp.nanosec
+    def _pairing_summary(self) -> str:
+        tolerance = self.pairing.tolerance_ns
+        within = "not measured" if tolerance is None else f"±{tolerance / 1e6:.1f} ms"
+        return (f", {self.without_color} skipped without their colour frame ({self.pairing.dropped} without one "
+                f"within the tolerance, {within})")
 
 
 def main(args: list[str] | None = None) -> None:
