@@ -264,14 +264,14 @@ def test_window_opens_at_the_rigid_front_and_closes_at_the_virtual_centroid():
     assert index_bent == closes and result_bent.status == STATUS_SCORED and result_bent.phi > 1.0
 
 
-def test_a_degenerate_frame_in_the_window_is_counted_but_not_scored():
+def test_a_degenerate_frame_in_the_window_is_rejected_not_scored():
     contours = translating(80)
     _, plain, _ = run_evaluator(contours)
     opens = round(plain.trace[0].stamp * FPS)
-    trailing, leading = rows_of(contours[opens + 1])  # a line over the fillet's own rows: no merge
+    trailing, leading = rows_of(contours[opens + 1])  # a line over the fillet's own rows: not its flat outline
     line = polygon_contour([(300, trailing), (300, (trailing + leading) / 2), (300, leading)])
     _, result, _ = run_evaluator(contours[:opens + 1] + [line] + contours[opens + 2:])
-    assert result.frames == plain.frames and math.isnan(result.trace[1].phi)
+    assert result.frames == plain.frames - 1 and result.rejected_frames == plain.rejected_frames + 1
     assert result.phi == pytest.approx(plain.phi, abs=1e-9)
 
 

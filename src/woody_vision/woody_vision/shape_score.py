@@ -107,6 +107,14 @@ MERGE_GROWTH = 1.25
 LATERAL_JUMP_RATIO = 0.4
 """A window frame whose centroid lies this far across the flow (× the reference width) from the reference's
 belongs to another fillet: fillets move along the flow, and draping shifts the centroid far less."""
+FLAT_OVERLAP_MIN = 0.8
+"""A window frame whose part still on the belt overlaps the reference outline, moved with the belt, by less than
+this (intersection over union) is not this fillet alone: a neighbour's outline joined to it, or a split of a
+merged blob cut a piece off it (:func:`flat_overlap`). The part on the belt lies flat, so it keeps its outline."""
+FLAT_MARGIN_PX = 4
+"""Rows before the roller edge left out of the flat part: the fillet starts to bend there."""
+FLAT_MIN_SHARE = 0.2
+"""The flat part is compared while the reference's part on the belt is at least this share of its area."""
 TRAILING_JUMP_PX = 3
 """A window frame whose trailing edge lies this far behind the previous frame's belongs to a merged follower."""
 LEADING_NARROW = "narrow"
@@ -274,6 +282,26 @@ class ShapeResult:
     """Frames scored after the window closed, up to the measuring point."""
     window_closed: bool = False
     """Whether the paper's window closed cleanly and without a gap, so that ``phi`` is the paper's Φ."""
+
+
+def flat_overlap(reference: np.ndarray, current: np.ndarray, shift_rows: int, last_row: int) -> float:
+    """Intersection over union of two outlines' parts at rows up to ``last_row``, the reference moved
+    ``shift_rows`` down the flow (NaN when the reference's part there is under FLAT_MIN_SHARE of its area)."""
+    ref_mask, ref_v, ref_u = fill_rows(reference)
+    cur_mask, cur_v, cur_u = fill_rows(current)
+    ref_v += int(shift_rows)
+    top, left = min(ref_v, cur_v), min(ref_u, cur_u)
+    rows = last_row - top + 1
+    if rows <= 0:
+        return math.nan
+    width = max(ref_u + ref_mask.shape[1], cur_u + cur_mask.shape[1]) - left
+    canvas = np.zeros((2, rows, width), bool)
+    for layer, (mask, v, u) in enumerate(((ref_mask, ref_v, ref_u), (cur_mask, cur_v, cur_u))):
+        part = mask[: max(0, last_row - v + 1)] > 0
+        canvas[layer, v - top: v - top + part.shape[0], u - left: u - left + part.shape[1]] = part
+    if canvas[0].sum() < FLAT_MIN_SHARE * np.count_nonzero(ref_mask):
+        return math.nan
+    return float(np.logical_and(*canvas).sum() / np.logical_or(*canvas).sum())
 
 
 def leading_end(contour: np.ndarray) -> str:
@@ -481,8 +509,12 @@ class ShapeEvaluator:
         if abs(_centroid_column(points) - self._reference_column) > LATERAL_JUMP_RATIO * self._reference_width:
             return True
         width = float(np.ptp(points[:, 0]) + 1)
-        return (cv2.contourArea(points) > MERGE_GROWTH * self._reference_area
-                or width > MERGE_GROWTH * self._reference_width)
+        grown = cv2.contourArea(points) > MERGE_GROWTH * self._reference_area
+        if grown or width > MERGE_GROWTH * self._reference_width:
+            return True
+        shift = trailing - int(self._reference_contour[:, 1].min())
+        overlap = flat_overlap(self._reference_contour, points, shift, int(self.edge_row) - FLAT_MARGIN_PX)
+        return overlap < FLAT_OVERLAP_MIN
 
     def _finish_line(self) -> ShapeResult:
         frames = self._trace + self._extra
