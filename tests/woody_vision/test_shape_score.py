@@ -30,6 +30,7 @@ from woody_vision.shape_score import (
     aspect_ratio,
     clip_body,
     fill_rows,
+    flat_overlap,
     leading_cut_rows,
     leading_end,
     make_reference,
@@ -262,6 +263,27 @@ def test_window_opens_at_the_rigid_front_and_closes_at_the_virtual_centroid():
     bent = translating(80, bend=foreshorten(0.4))
     index_bent, result_bent, _ = run_evaluator(bent)
     assert index_bent == closes and result_bent.status == STATUS_SCORED and result_bent.phi > 1.0
+
+
+def test_the_flat_part_overlaps_its_reference_moved_with_the_belt_unless_cut_or_joined():
+    reference = kite(300.0)
+    moved = kite(330.0)
+    assert flat_overlap(reference, moved, 30, 320) == pytest.approx(1.0, abs=0.02)
+    cut = polygon_contour([(250, 230), (250, 130), (200, 80), (200, 330)])  # its left half: a split took the rest
+    assert flat_overlap(reference, cut, 30, 320) < 0.6
+    joined = polygon_contour([(150, 330), (250, 230), (250, 130), (200, 80), (120, 130), (120, 330)])
+    assert flat_overlap(reference, joined, 30, 320) < 0.8  # a neighbour's strip joined at its side
+    assert math.isnan(flat_overlap(reference, moved, 30, 60))  # hardly anything of it left on the belt
+
+
+def test_a_frame_that_lost_part_of_its_flat_outline_is_rejected_and_never_scores():
+    contours = translating(80)
+    _, plain, _ = run_evaluator(contours)
+    opens = round(plain.trace[0].stamp * FPS)
+    piece = contours[opens + 1].copy()
+    piece = piece[piece[:, 0] >= 300]  # the right half: a split of a merged blob cut the rest off
+    _, result, _ = run_evaluator(contours[:opens + 1] + [piece] + contours[opens + 2:])
+    assert result.rejected_frames == plain.rejected_frames + 1 and result.phi == pytest.approx(plain.phi, abs=1e-9)
 
 
 def test_a_degenerate_frame_in_the_window_is_rejected_not_scored():
