@@ -286,6 +286,15 @@ def test_a_frame_that_lost_part_of_its_flat_outline_is_rejected_and_never_scores
     assert result.rejected_frames == plain.rejected_frames + 1 and result.phi == pytest.approx(plain.phi, abs=1e-9)
 
 
+def test_the_speed_is_the_fillets_recent_motion_so_a_speed_change_is_followed():
+    """3 px a frame for most of the approach, then 4 (the belt sped up): measured at the new speed."""
+    leads = [60.0 + 3.0 * i for i in range(30)]
+    leads += [leads[-1] + 4.0 * i for i in range(1, 60)]
+    contours = [polygon_contour(teardrop_polygon((300.0, lead - 55.0), 110.0, 60.0)) for lead in leads]
+    _, result, _ = run_evaluator(contours)
+    assert result.speed_px_s == pytest.approx(4.0 * FPS, rel=0.02)
+
+
 def test_a_degenerate_frame_in_the_window_is_rejected_not_scored():
     contours = translating(80)
     _, plain, _ = run_evaluator(contours)

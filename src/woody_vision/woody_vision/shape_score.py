@@ -120,6 +120,9 @@ TRAILING_JUMP_PX = 3
 LEADING_NARROW = "narrow"
 LEADING_BLUNT = "blunt"
 FLAT_HISTORY = 8
+SPEED_FRAMES = 8
+"""Flat frames the fillet's speed is measured over (0.23 s at 30 Hz: about 100 rows at 100 FPM, so a pixel of
+outline noise moves it by about 1 %, and a belt speed change is followed within that many frames)."""
 """Flat outlines kept to choose an unmerged reference from."""
 
 
@@ -532,10 +535,11 @@ class ShapeEvaluator:
         return float(speed * interval) if math.isfinite(interval) and math.isfinite(speed) else math.inf
 
     def _speed_px_s(self) -> float:
-        """The fillet's speed along the image rows while flat (NaN when too few frames tell)."""
+        """The fillet's speed along the image rows over its last SPEED_FRAMES flat frames (NaN when too few frames
+        tell): its own recent motion, so a belt that changed speed during the approach is measured at its new speed."""
         if len(self._approach) < 2:
             return math.nan
-        (t0, r0), (t1, r1) = self._approach[0], self._approach[-1]
+        (t0, r0), (t1, r1) = self._approach[-SPEED_FRAMES:][0], self._approach[-1]
         return (r1 - r0) / (t1 - t0) if t1 > t0 else math.nan
 
     def finish(self) -> ShapeResult | None:
