@@ -69,7 +69,10 @@ SPEEDS = PAPER_SPEEDS_FPM
 LINE_SPEEDS = (90.0, 100.0, 115.0, 130.0, 140.0)
 """The line cuts are fitted over the speeds a line runs at, the paper's two among them."""
 LINE_K = (0.0, 10.0, 20.0, 40.0, 100.0)
-LINE_CONDITIONS = ("tidy", "messy")
+LINE_CONDITIONS = ("tidy", "turned", "blunt", "messy")
+"""The line cuts are fitted over every way a fillet lies, each on its own and together: with the tidy and messy
+line alone a stiff fillet both blunt end first and turned was scarce, and the cut's blunt and turn terms, each
+estimated mostly on normal fillets, passed such a stiff fillet on the live line."""
 PROGRAM = "woody calibrate"
 """Prefixes the lines its mesh sets' skipped and converted files are named in."""
 
