@@ -178,6 +178,20 @@ def test_stale_track_ghost_does_not_steal_a_live_tracks_blob():
     assert ghost in [t.track_id for t in update.active]
 
 
+def test_a_ghost_stalled_at_the_edge_moves_on_with_the_belt_and_leaves_the_next_fillet_its_own_track():
+    """A fillet tipping over the roller stalls its visible centroid, then vanishes; the next fillet of its lane
+    arrives at that place 14 frames later and must open a track of its own, not continue the stalled one."""
+    tracker = CentroidTracker(max_distance_px=40.0, max_unseen=15)
+    for i in range(4):  # the tipping fillet stalls at v 280 while its neighbour lane's rides at 12 px a frame
+        update = tracker.update([square_blob(300, 280), square_blob(500, 20 + 12 * i)], i / FPS)
+    stalled = next(t.track_id for t in update.active if t.blob.centroid[0] == 300)
+    for i in range(4, 18):
+        update = tracker.update([square_blob(500, 20 + 12 * i)] + ([square_blob(300, 282)] if i == 17 else []),
+                                i / FPS)
+    follower = next(t for t in update.active if t.blob.centroid[0] == 300 and t.unseen == 0)
+    assert follower.track_id != stalled
+
+
 def test_lane_from_the_mean_column():
     tracker = CentroidTracker(lane_layout=LAYOUT3)
     blobs = [square_blob(LAYOUT3.lane_center_u(lane) + offset, 100) for lane, offset in ((0, 25), (1, -25), (2, 10))]

@@ -36,6 +36,8 @@ GAP_GATE_GROWTH = 0.5
 from its last two sightings, and a fillet entering the view from the image border moves its centroid at about
 half its speed, so after a burst of lost frames the prediction can fall that much short."""
 NO_LANE = -1
+BELT_SPEED_MIN_AGE = 3
+"""Updates a track must have lived before its motion tells the belt's speed (it has none on the frame it opens)."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,15 @@ class TrackUpdate:
     """Tracks still alive, sorted by id (including ones unseen this frame)."""
     ended: list[Track]
     """Tracks that ended at this update."""
+
+
+def _belt_speed(tracks: Sequence[Track]) -> float:
+    """The belt's speed along the image rows now (px/s): the median motion of the established tracks seen in their
+    latest frame, 0 when none tells. A track that went unseen is predicted to move at least this fast down the
+    flow: its own last motion may have stalled (a fillet tipping over the roller shortens its visible outline), and
+    a ghost that stays at the edge takes the next fillet of its lane when it arrives there."""
+    moving = [t.velocity[1] for t in tracks if t.unseen == 0 and t.age >= BELT_SPEED_MIN_AGE]
+    return float(np.median(moving)) if moving else 0.0
 
 
 class CentroidTracker:
@@ -123,6 +134,8 @@ class CentroidTracker:
         tracks = [self._tracks[i] for i in ids]
         elapsed = np.array([max(stamp - t.stamp, 0.0) for t in tracks])
         velocity = np.array([t.velocity for t in tracks])
+        unseen = np.array([t.unseen > 0 for t in tracks])
+        velocity[unseen, 1] = np.maximum(velocity[unseen, 1], _belt_speed(tracks))
         predicted = np.array([t.blob.centroid for t in tracks]) + velocity * elapsed[:, None]
         centroids = np.array([b.centroid for b in blobs], dtype=float)
         distance = np.linalg.norm(predicted[:, None, :] - centroids[None, :, :], axis=2)
