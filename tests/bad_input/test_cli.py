@@ -99,8 +99,8 @@ def test_a_speed_outside_the_calibrated_ones_is_warned_about_at_the_start_and_in
     out = tmp_path / "run"
     result = woody("run", "--fillets", "3", "--speed-fpm", "200", "--out", str(out))
     assert result.returncode == 0, result.stderr[-2000:]
-    warning = ("line speed 200 FPM is outside the 90..140 FPM the calibration's cuts were fitted on: the grade is "
-               "not validated at this speed")
+    warning = ("line speed 200 FPM is outside the 90..140 FPM the calibration's cuts were fitted on: fillets "
+               "measured outside them are unscored, so diverted")
     first = [line for line in result.stderr.splitlines() if not line.startswith("pybullet build time")][0]
     assert first == f"woody run: {warning}"  # before the line starts
     report = (out / "report.md").read_text()

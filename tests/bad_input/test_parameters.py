@@ -121,7 +121,7 @@ def refused(domain) -> dict:
     """Every command of both tables and every node's ``--help`` and stray argument, run once."""
     commands = [*NODE_REFUSALS, *((node, "--help") for node in NODES), *((node, "--lanes", "3") for node in NODES),
                 CONFIGURED_HELP]
-    outcomes = run_entries(commands, domain, timeout=60)
+    outcomes = run_entries(commands, domain, timeout=120)  # four at a time on two cores, each importing pybullet
     runs = [("woody", "run", "--fillets", "1", "--out", "run", *options) for options in RUN_REFUSALS]
     outcomes += run_entries(runs, None, timeout=60)
     return dict(zip([*commands, *RUN_REFUSALS], outcomes))
