@@ -72,15 +72,15 @@ def records_from_bag(path: Path) -> tuple[LineRecords, str | None]:
     """The line's records in a bag (of a line in any namespace), and where a truncated bag ends (None for a complete
     one): the readable part of a cut recording still counts."""
     records, ended = LineRecords(), None
-    suffixes = {"/" + topics.GROUND_TRUTH: records.spawns.append, "/" + topics.VERDICTS: records.verdicts.append,
-                "/" + topics.SIDE_METRICS: records.sides.append, "/" + topics.GATE_COMMANDS: records.gated.add}
-    flatten = {"/" + topics.GROUND_TRUTH: spawn_from_msg, "/" + topics.VERDICTS: verdict_from_msg,
-               "/" + topics.SIDE_METRICS: side_from_msg, "/" + topics.GATE_COMMANDS: lambda m: (m.lane, m.fillet_id)}
+    suffixes = {"/" + topics.GROUND_TRUTH: (spawn_from_msg, records.spawns.append),
+                "/" + topics.VERDICTS: (verdict_from_msg, records.verdicts.append),
+                "/" + topics.SIDE_METRICS: (side_from_msg, records.sides.append),
+                "/" + topics.GATE_COMMANDS: (lambda m: (m.lane, m.fillet_id), records.gated.add)}
     wanted = [t for t in bag_topics(path) if t.endswith(tuple(suffixes))]
     try:
         for topic, type_name, data, _log_time in read_bag(path, topics=wanted):
-            suffix = next(suffix for suffix in suffixes if topic.endswith(suffix))
-            suffixes[suffix](flatten[suffix](decode(type_name, data)))
+            flatten, keep = next(sink for suffix, sink in suffixes.items() if topic.endswith(suffix))
+            keep(flatten(decode(type_name, data)))
     except BagError as exc:
         if not records.spawns and not records.verdicts:
             raise

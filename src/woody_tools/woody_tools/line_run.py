@@ -275,7 +275,8 @@ def _check_stop() -> None:
 
 def speed_notes(args: argparse.Namespace) -> list[str]:
     """A line per belt speed of the run (its --speed-fpm and --speed-change) outside the speeds the calibration's
-    cuts were fitted on: the grade is not validated there."""
+    cuts were fitted on: the grader leaves fillets measured there unscored (or grades them on extrapolated cuts with
+    --grade-outside-calibration)."""
     speeds = dict.fromkeys((args.speed_fpm, args.speed_change_fpm or args.speed_fpm))
     notes = (uncalibrated_speed_note(fpm, args.calibrated_speeds, args.grade_outside_calibration) for fpm in speeds)
     return [note for note in notes if note]

@@ -53,7 +53,7 @@ SIDE_MATCH_SLACK_S = 0.3
 
 
 def calibrated_rules(calibration) -> GradingRules:
-    """The line's rules from a calibration: the reject cut and the grade's two cuts on ``line_phi``."""
+    """The line's rules from a calibration: the reject cut and the grade's severe cut on ``line_phi``."""
     return GradingRules(calibration.line_threshold, calibration.severe_threshold)
 
 
