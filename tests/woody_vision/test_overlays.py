@@ -13,10 +13,11 @@ import cv2
 import numpy as np
 
 from woody_common.line import TOP_CAMERA_HEIGHT_M
+from woody_vision.annotations import image_annotations, overlays_of
 from woody_vision.camera_model import LaneLayout
 from woody_vision.grader_core import FilletGrader, TrackObservation
 from woody_vision.grading import GradingRules
-from woody_vision.overlays import FRAME, MEASURED, REFERENCE, Overlay, outline, parse_ns, verdict_overlays
+from woody_vision.overlays import FRAME, MEASURED, REFERENCE, Overlay, outline, parse_text, verdict_overlays
 from woody_vision.segmentation import segment_depth
 from woody_vision.synthetic import DEFAULT_TOP_K, TopFillet, TopScene
 from woody_vision.tracking import CentroidTracker
@@ -66,15 +67,31 @@ def test_every_overlay_outline_lies_on_its_fillet_in_the_colour_frame():
     assert all(o.score == v.score and o.cut == v.threshold for v in verdicts for o in verdict_overlays(v))
 
 
-def test_a_label_reads_back_from_its_ns():
+def test_a_label_reads_back_from_its_text():
     points = np.array([[1.0, 2.0], [3.0, 4.0], [5.0, 1.0]])
-    frame = Overlay(7, 1, "pending", FRAME, 1.5, points, phi=0.01234)
-    assert frame.ns == "lane1/pending/id 7/Φ_t 0.0123"
-    back = parse_ns(frame.ns, 1.5, points)
-    assert (back.track_id, back.lane, back.label, back.kind) == (7, 1, "pending", FRAME)
-    assert back.phi == 0.0123
-    reference = Overlay(7, 1, "woody", REFERENCE, 1.0, points, score=0.02, cut=math.nan)
-    assert reference.ns == "lane1/woody/id 7/reference/score 0.0200 cut -"
-    back = parse_ns(reference.ns, 1.0, points)
-    assert back.kind == REFERENCE and back.score == 0.02 and math.isnan(back.cut)
-    assert parse_ns("lane1/woody", 1.0, points) is None  # a marker of an older format is skipped
+    frame = Overlay(7, 1, "pending", FRAME, 1.5, points, phi=12.3456)
+    assert frame.text == "7 lane 1 pending Φ_t 12.346"
+    back = parse_text(frame.text, 1.5, points)
+    assert (back.track_id, back.lane, back.label, back.kind, back.stamp) == (7, 1, "pending", FRAME, 1.5)
+    assert back.phi == 12.346
+    reference = Overlay(7, 1, "woody", REFERENCE, 1.0 / 3.0, points, score=3.21, cut=math.nan)
+    assert reference.text == "7 lane 1 woody reference score 3.210 cut - frame 0.333333333 s"
+    back = parse_text(reference.text, 2.0, points)  # drawn on a later frame, read back with its own frame's stamp
+    assert back.kind == REFERENCE and back.score == 3.21 and math.isnan(back.cut) and back.stamp == 0.333333333
+    assert parse_text("lane1/woody/id 7", 1.0, points) is None  # a label of another format is skipped
+
+
+def test_one_frames_annotations_hold_each_outline_with_its_label_and_read_back():
+    points = np.array([[10.0, 20.0], [30.0, 20.0], [20.0, 40.0]])
+    overlays = [Overlay(7, 1, "pending", FRAME, 1.5, points, phi=12.3),
+                Overlay(8, 2, "woody", REFERENCE, 1.2, points + 5, score=3.2, cut=5.1),
+                Overlay(8, 2, "woody", MEASURED, 1.4, points + 9, score=3.2, cut=5.1)]
+    msg = image_annotations(overlays, 1.5)
+    assert len(msg.points) == len(msg.texts) == 3 and not msg.circles
+    assert all(p.type == p.LINE_LOOP and len(p.points) == 3 and p.timestamp.sec == 1 for p in msg.points)
+    assert [t.text for t in msg.texts] == [o.text for o in overlays]
+    assert msg.points[0].outline_color.g > 0.8 and msg.points[1].outline_color.b == 1.0  # pending, reference
+    assert msg.texts[0].position.y < points[:, 1].min()  # the label sits above its outline
+    back = overlays_of(msg)
+    assert [(o.track_id, o.kind, o.stamp) for o in back] == [(7, FRAME, 1.5), (8, REFERENCE, 1.2), (8, MEASURED, 1.4)]
+    assert np.allclose(back[2].outline, points + 9)

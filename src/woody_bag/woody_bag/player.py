@@ -7,7 +7,8 @@ The options and exit codes are `woody_tools.commands.replay`'s. Behaviour:
   (reliable unless they were all best-effort; transient-local when they all
   were, e.g. ``/line/ground_truth``), keep-last 100.
 - Pacing: message *i* goes out at ``start + (log_time_i - log_time_0) / rate``
-  on the wall clock (``log_time`` = the recorder's wall-clock reception time).
+  on the wall clock (``log_time`` = the recorder's clock at reception: the line's sim time in a
+  ``woody run`` bag, so a bag plays at the line's own pace).
   A replayer that falls behind publishes at once and never skips.
 - ``/clock``: the recorded ``/clock`` messages are republished unchanged in
   their place, so ``use_sim_time`` nodes see the sim times of the recording

@@ -43,6 +43,19 @@ def qos_profiles_yaml(profiles: Iterable[Any]) -> str:
     return "\n".join(out)
 
 
+def subscription_qos(publishers: Iterable[Any], depth: int) -> Any:
+    """rosbag2's adaptive rule for subscribing to what ``publishers`` (rclpy TopicEndpointInfo) offer: reliable
+    unless one is best-effort, transient-local (latched) when every one is, keep-last ``depth``."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    offered = [p.qos_profile for p in publishers]
+    reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+    latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
 def parse_qos_profiles(text: str) -> list[dict[str, Any]]:
     """The profiles of an ``offered_qos_profiles`` string as dicts (enum names lower case)."""
     if not text or not text.strip():

@@ -26,15 +26,15 @@ Parameters (``--ros-args -p name:=value``):
 Unknown parameter names, malformed overrides and other arguments are refused
 with one line (exit code 2); ``--help`` prints this list.
 
-Timing: the MCAP ``log_time`` of a message is the **system (wall) clock at
-reception** (the middleware's reception timestamp, ns since the Unix epoch),
-whatever ``use_sim_time`` says; ``publish_time`` is the publisher's source
-timestamp (also wall clock). Replay paces messages by ``log_time``, so it
-reproduces what the live subscribers saw, including a simulator running
-slower or faster than real time; simulated time travels inside the bag as the
-recorded ``/clock`` messages and header stamps, which replay republishes
-unchanged, so ``use_sim_time`` nodes fed by a replay see the same sim times
-as the live run.
+Timing: the MCAP ``log_time`` of a message is the **recorder's own clock at
+reception**, as ``ros2 bag record`` writes it: the line's sim time when
+``use_sim_time`` is true (``woody run`` sets it, like ``ros2 bag record
+--use-sim-time``), else the system clock, ns. Messages are taken one callback at a
+time on one thread and written in that order, so ``log_time`` never decreases and
+a bag plays in Foxglove and `woody replay` at the line's own pace, whatever
+the line's real-time factor was. ``publish_time`` is the publisher's source
+timestamp (wall clock). Messages received before the first ``/clock`` (latched
+topics) are stamped 0, as rosbag2 stamps them.
 
 QoS: each topic is subscribed the way its publishers offer it (rosbag2's
 adaptive rule): reliable unless some publisher is best-effort, transient-local
@@ -85,14 +85,15 @@ from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as RosClock
 
 from woody_bag.errors import BagError
-from woody_bag.qos import qos_profiles_yaml
+from woody_bag.qos import qos_profiles_yaml, subscription_qos
 from woody_bag.schemas import message_class, message_definition
 from woody_bag.summary import LOSSES_RECORD, losses_record
 from woody_bag.writer import BagWriter
+from woody_common.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher, Health
 from woody_common.ros_params import check_overrides, declare, run_node, usage
 from woody_common.topics import RECORDED_CLOCK
 
@@ -129,7 +130,7 @@ class Recorder(Node):
             "recorder": "woody_bag.recorder_node", "topics": sorted(self._topics),
             "topic_regex": given["topic_regex"], "exclude_regex": given["exclude_regex"],
             "use_sim_time": bool(self.get_parameter("use_sim_time").value), "start_unix_ns": time.time_ns(),
-            "log_time": "system (wall) clock at reception, ns since the Unix epoch",
+            "log_time": "the recorder's clock at reception (sim time with use_sim_time), ns",
             "publish_time": "publisher's source timestamp (wall clock)",
             "run_settings": given["run_settings"],
         }
@@ -161,10 +162,22 @@ class Recorder(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(given["discovery_period"], self._discover, clock=steady)
         self.create_timer(ANNOUNCE_PERIOD_S, self._announce_written_clock, clock=steady)
+        self.diagnostics = DiagnosticsPublisher(self, self.health)
         self.get_logger().info(
             f"recording to {self.output} ({'topics ' + ', '.join(sorted(self._topics)) if self._topics else ''}"
             f"{' regex ' + self._regex.pattern if self._regex else ''}"
-            f"{'all topics' if not self._topics and not self._regex else ''}); log_time = wall clock at reception")
+            f"{'all topics' if not self._topics and not self._regex else ''}); log_time = "
+            f"{'sim' if self.get_parameter('use_sim_time').value else 'system'} time at reception")
+
+    def health(self) -> Health:
+        """Messages lost (in transport, or dropped with the buffer full) are a warning; a write error an error."""
+        drops = self.drops()
+        lost = sum(max(0, p - w) for w, p in drops.values() if p is not None) + sum(self._dropped.values())
+        values = {"messages written": sum(self._writer.counts.values()), "topics": len(drops),
+                  "unwritten (MB)": self._buffered / 1e6, "lost": lost}
+        if self._error is not None:
+            return Health(ERROR, self._failure_line(), values)
+        return Health(WARN if lost else OK, f"{values['messages written']} messages written, {lost} lost", values)
 
     # ------------------------------------------------------------------ parameters
     def _declare(self) -> dict:
@@ -237,17 +250,10 @@ class Recorder(Node):
         self._ignored.add(topic)
         self.get_logger().warning(f"not recording {topic}: {reason}")
 
-    def _qos(self, publishers) -> QoSProfile:
-        reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
-        latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
-        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self._depth,
-                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
-
     def _subscribe(self, topic: str, type_name: str, msg_type: type, publishers) -> None:
-        qos = self._qos(publishers)
+        qos = subscription_qos(publishers, self._depth)
         self._enqueue((topic, None, type_name, qos_profiles_yaml(p.qos_profile for p in publishers), 0), 0)
-        enqueue, time_ns = self._enqueue, time.time_ns
+        enqueue, clock = self._enqueue, self.get_clock()
         seen = self._seen[topic] = [None, 0, 0, len(publishers)]
         if type_name == CLOCK_TYPE:
             self._clock_topics.add(topic)
@@ -258,8 +264,7 @@ class Recorder(Node):
                 seen[0] = sequence if seen[0] is None else min(seen[0], sequence)
                 seen[1] = max(seen[1], sequence)
             seen[2] += 1
-            enqueue((topic, data, info["received_timestamp"] or time_ns(), info["source_timestamp"], sequence or 0),
-                    len(data))
+            enqueue((topic, data, clock.now().nanoseconds, info["source_timestamp"], sequence or 0), len(data))
 
         def on_message(data: bytes, info: dict) -> None:
             keep(data, info)

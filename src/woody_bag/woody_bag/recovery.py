@@ -10,7 +10,7 @@ from mcap.records import Channel, Message, Metadata, Schema
 
 from woody_bag.errors import BagError, Truncated
 from woody_bag.records import open_bag, span_text, stream_records
-from woody_bag.writer import BagWriter
+from woody_bag.writer import ROSBAG2_RECORD, BagWriter
 
 
 def recover_bag(source: str | os.PathLike, target: str | os.PathLike, *, overwrite: bool = False) -> dict[str, Any]:
@@ -58,6 +58,8 @@ def _recovery_writer(target: str | os.PathLike, state: dict[str, Any], overwrite
 def _copy_record(record: Any, state: dict[str, Any], target: str | os.PathLike, overwrite: bool) -> None:
     """Copy one data-section record of a bag being recovered into the target."""
     if isinstance(record, Metadata):
+        if record.name == ROSBAG2_RECORD:
+            return  # the copy's own, of what it holds, is written when it closes
         if state["writer"] is None:
             state["metadata"][record.name] = dict(record.metadata)
         else:
@@ -70,7 +72,7 @@ def _copy_record(record: Any, state: dict[str, Any], target: str | os.PathLike, 
         schema = state["schemas"].get(record.schema_id)
         if schema is not None:
             writer.add_topic(record.topic, schema.name, record.metadata.get("offered_qos_profiles", ""),
-                             definition=schema.data)
+                             definition=schema.data, topic_type_hash=record.metadata.get("topic_type_hash"))
             state["channels"][record.id] = record.topic
     elif isinstance(record, Message) and record.channel_id in state["channels"]:
         writer.write(state["channels"][record.channel_id], record.data, record.log_time, record.publish_time,

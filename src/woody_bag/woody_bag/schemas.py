@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import json
 import os
 import re
 import sys
@@ -89,6 +90,22 @@ def message_definition(type_name: str) -> str:
 
     visit(pkg, root)
     return "\n".join(blocks)
+
+
+@functools.cache
+def type_hash(type_name: str) -> str:
+    """The type's ``RIHS01_...`` hash (REP 2011), as rosidl wrote it into ``share/<pkg>/msg/<Type>.json``;
+    rosbag2 keeps it as each channel's ``topic_type_hash``. `LookupError` when no such file is installed."""
+    full = normalize_type(type_name)
+    pkg, kind, name = full.split("/")
+    for prefix in _prefixes():
+        candidate = prefix / "share" / pkg / kind / f"{name}.json"
+        if candidate.is_file():
+            hashes = json.loads(candidate.read_text()).get("type_hashes", [])
+            for entry in hashes:
+                if entry.get("type_name") == full:
+                    return str(entry["hash_string"])
+    raise LookupError(f"no type hash of {full} under share/ of {os.pathsep.join(map(str, _prefixes()))}")
 
 
 @functools.cache

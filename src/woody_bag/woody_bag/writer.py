@@ -1,6 +1,8 @@
 """Writing a bag the rosbag2 way: profile ``ros2``, ``ros2msg`` schemas, ``cdr`` messages, crash-tolerant chunks.
 
-Channels carry rosbag2's ``offered_qos_profiles`` metadata (`woody_bag.qos`).
+Channels carry rosbag2's ``offered_qos_profiles`` (`woody_bag.qos`) and ``topic_type_hash`` metadata; a closed
+bag ends with rosbag2's ``rosbag2`` metadata record (its ``BagMetadata`` as YAML, version 9), which ``ros2 bag
+info`` and rosbag2's MCAP plugin read.
 Crash tolerance: messages are grouped in zstd-compressed chunks that go to the
 operating system as soon as they are complete (no user-space buffering), and
 `BagWriter.flush` closes the current chunk early. A process killed with SIGKILL
@@ -17,13 +19,18 @@ from pathlib import Path
 from typing import Any
 
 import mcap.writer as _mcap_writer
+import yaml
 from mcap.writer import CompressionType, IndexType, Writer
 
 from woody_bag.errors import BagError
-from woody_bag.schemas import message_definition, normalize_type
+from woody_bag.schemas import message_definition, normalize_type, type_hash
 
 DEFAULT_CHUNK_SIZE = 4 * 1024 * 1024
 LIBRARY = "woody_bag"
+ROSBAG2_RECORD = "rosbag2"
+"""The metadata record rosbag2's MCAP plugin writes and reads: ``serialized_metadata`` (BagMetadata YAML)."""
+ROSBAG2_METADATA_VERSION = 9
+ROS_DISTRO = "jazzy"
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE,
                 "": CompressionType.NONE}
 
@@ -133,6 +140,8 @@ class BagWriter:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._types: dict[str, str] = {}
+        self._topic_metadata: dict[str, dict[str, str]] = {}
+        self._span: list[int] = []  # [first log_time, last log_time] once a message is written
         self.counts: dict[str, int] = {}
         self.bytes_written = 0
         self._pending = 0
@@ -147,11 +156,13 @@ class BagWriter:
             raise BagError(f"{self.path}: cannot write bag: {exc.strerror or exc}") from None
 
     # ------------------------------------------------------------------ topics and messages
-    def add_topic(self, topic: str, type_name: str, qos_profile_yaml: str = "", definition: bytes | None = None) -> int:
+    def add_topic(self, topic: str, type_name: str, qos_profile_yaml: str = "", definition: bytes | None = None,
+                  topic_type_hash: str | None = None) -> int:
         """Register ``topic`` of ``type_name``; returns its channel id (idempotent per topic).
 
-        ``definition`` is the schema text to store (default: this installation's ``ros2msg``
-        text), so a recovered bag keeps the schemas it was recorded with.
+        ``definition`` and ``topic_type_hash`` are the schema text and type hash to store (default: this
+        installation's ``ros2msg`` text and hash, empty when it has none), so a recovered bag keeps the ones it
+        was recorded with.
         """
         if topic in self._channels:
             return self._channels[topic]
@@ -161,9 +172,15 @@ class BagWriter:
             text = definition if definition is not None else message_definition(full).encode()
             schema_id = self._writer.register_schema(full, "ros2msg", text)
             self._schemas[full] = schema_id
-        channel_id = self._writer.register_channel(
-            topic=topic, message_encoding="cdr", schema_id=schema_id,
-            metadata={"offered_qos_profiles": qos_profile_yaml})
+        if topic_type_hash is None:
+            try:
+                topic_type_hash = type_hash(full)
+            except LookupError:
+                topic_type_hash = ""
+        metadata = {"offered_qos_profiles": qos_profile_yaml, "topic_type_hash": topic_type_hash}
+        channel_id = self._writer.register_channel(topic=topic, message_encoding="cdr", schema_id=schema_id,
+                                                   metadata=metadata)
+        self._topic_metadata[topic] = metadata
         self._channels[topic] = channel_id
         self._types[topic] = full
         self.counts[topic] = 0
@@ -185,6 +202,10 @@ class BagWriter:
         self.counts[topic] += 1
         self.bytes_written += len(data)
         self._pending += 1
+        if self._span:
+            self._span[0], self._span[1] = min(self._span[0], log_time_ns), max(self._span[1], log_time_ns)
+        else:
+            self._span = [log_time_ns, log_time_ns]
 
     def add_metadata(self, name: str, data: dict[str, Any]) -> None:
         self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
@@ -207,9 +228,27 @@ class BagWriter:
         try:
             if _ZSTD is not None:
                 _ZSTD.local.compressor = self._compressor
+            self.add_metadata(ROSBAG2_RECORD, {"serialized_metadata": self.rosbag2_metadata()})
             self._writer.finish()
         finally:
             self._file.close()
+
+    def rosbag2_metadata(self) -> str:
+        """rosbag2's ``BagMetadata`` of what was written so far, as the YAML its MCAP plugin stores."""
+        start, end = self._span or [0, 0]
+        count = sum(self.counts.values())
+        topics = [{"topic_metadata": {"name": topic, "type": full, "serialization_format": "cdr",
+                                      "offered_qos_profiles": self._topic_metadata[topic]["offered_qos_profiles"],
+                                      "type_description_hash": self._topic_metadata[topic]["topic_type_hash"]},
+                   "message_count": self.counts[topic]} for topic, full in self._types.items()]
+        duration, starting = {"nanoseconds": end - start}, {"nanoseconds_since_epoch": start}
+        return yaml.safe_dump({
+            "version": ROSBAG2_METADATA_VERSION, "storage_identifier": "mcap", "duration": duration,
+            "starting_time": starting, "message_count": count, "topics_with_message_count": topics,
+            "compression_format": "", "compression_mode": "", "relative_file_paths": [self.path.name],
+            "files": [{"path": self.path.name, "starting_time": starting, "duration": duration,
+                       "message_count": count}],
+            "custom_data": {}, "ros_distro": ROS_DISTRO}, sort_keys=False)
 
     def __enter__(self) -> BagWriter:
         return self

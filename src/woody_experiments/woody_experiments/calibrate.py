@@ -56,7 +56,7 @@ from woody_common.calibration import (
     resolved_calibration,
     write_calibration,
 )
-from woody_common.line import CLASS_K, NORMAL_K, PAPER_SPEEDS_FPM, SEVERE_K
+from woody_common.line import CLASS_K, MAX_LANES, NORMAL_K, PAPER_SPEEDS_FPM, SEVERE_K
 from woody_experiments import cluster, evaluation, line_grade, physics_fit
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, load_meshes
@@ -69,10 +69,10 @@ SPEEDS = PAPER_SPEEDS_FPM
 LINE_SPEEDS = (90.0, 100.0, 115.0, 130.0, 140.0)
 """The line cuts are fitted over the speeds a line runs at, the paper's two among them."""
 LINE_K = (0.0, 10.0, 20.0, 40.0, 100.0)
-LINE_CONDITIONS = ("tidy", "turned", "blunt", "messy")
-"""The line cuts are fitted over every way a fillet lies, each on its own and together: with the tidy and messy
-line alone a stiff fillet both blunt end first and turned was scarce, and the cut's blunt and turn terms, each
-estimated mostly on normal fillets, passed such a stiff fillet on the live line."""
+LINE_CONDITIONS = ("tidy", "turned", "blunt", "messy", "wide")
+"""The line cuts are fitted over every way a fillet lies, each on its own and together, and over every turn the
+line allows (wide): the messy line's turns are a normal draw, so a stiff fillet both blunt end first and turned
+past 25 deg was scarce, and a cut fitted without it was extrapolated exactly where such a fillet lies."""
 PROGRAM = "woody calibrate"
 """Prefixes the lines its mesh sets' skipped and converted files are named in."""
 
@@ -138,7 +138,8 @@ def choose_line_cuts(cal_names: list[str], test_names: list[str], physics: dict,
                      client) -> dict:
     """The line's three cuts on the calibration meshes, and their figures on the held-out ones."""
     def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
-        runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
+        """Rows of every lane of the widest line: the cuts see each place across the belt a fillet is seen from."""
+        runs = [RunSpec(n, k, s, lanes=MAX_LANES, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
                         friction_static=physics["friction_static"], side=False, condition=c,
                         calibration=args.calibration)
                 for n in names for c in LINE_CONDITIONS for s in LINE_SPEEDS for k in LINE_K]

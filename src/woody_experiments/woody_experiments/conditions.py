@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import zlib
 
-from woody_sim.line_conditions import FilletPlacement, LineConditions, line_preset, placement_for
+from woody_sim.line_conditions import MAX_YAW_DEG, FilletPlacement, LineConditions, line_preset, placement_for
 
 _MESSY = line_preset("messy")
 TIDY = "tidy"
@@ -23,9 +23,13 @@ SWEEP_CONDITIONS: dict[str, LineConditions] = {
     "blunt": LineConditions(blunt_fraction=1.0),
     "size": LineConditions(scale_min=_MESSY.scale_min, scale_max=_MESSY.scale_max),
     "messy": _MESSY,
+    "wide": LineConditions(yaw_sd_deg=MAX_YAW_DEG, yaw_max_deg=MAX_YAW_DEG, blunt_fraction=0.5,
+                           scale_min=_MESSY.scale_min, scale_max=_MESSY.scale_max),
 }
 """Condition name -> how fillets lie: tidy; turned (the messy yaw alone); blunt (every fillet blunt end first);
-size (the messy size spread alone); messy (all of it, half blunt end first)."""
+size (the messy size spread alone); messy (all of it, half blunt end first); wide (turns spread over every turn
+the line allows, up to MAX_YAW_DEG, half blunt end first: the turned fillets, stiff and blunt first among them,
+that the messy line draws rarely)."""
 
 
 def sweep_condition(name: str) -> LineConditions:

@@ -51,7 +51,7 @@ from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config, se
 from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer
 from woody_sim.sensor_model import sensor_preset
-from woody_vision.camera_model import LaneLayout
+from woody_vision.camera_model import LaneLayout, belt_outline
 from woody_vision.grader_core import FilletGrader, TrackObservation, calibrated_rules
 from woody_vision.grading import GradingRules
 from woody_vision.segmentation import REAL_CAMERA_FILTERS, BackgroundModel, SegmentationParams, segment_depth
@@ -101,7 +101,7 @@ class RunSpec:
     yaw_deg: float = 0.0
     """An extra turn about the vertical (woody_sim.meshes.yawed), on top of the condition's placement."""
     condition: str = TIDY
-    """How fillets lie on the line (woody_experiments.conditions): tidy, turned, blunt, size or messy."""
+    """How fillets lie on the line (woody_experiments.conditions): tidy, turned, blunt, size, messy or wide."""
     calibration: str | None = None
     """The calibration file the run's physics and cuts come from (a path, so a worker process reads the same
     file); None = the resolved one (woody_common.calibration.resolve_calibration)."""
@@ -249,6 +249,7 @@ class _TopView:
                                    pixels_per_metre=float(top_cam.k[1, 1]) / geometry.top_height,
                                    fitted_range=None)  # rows are measurements: the reports apply the range
         self.tracker = CentroidTracker(lane_layout=layout)
+        self.k, self.height = tuple(top_cam.k.reshape(-1)), geometry.top_height
         self.camera, self.rng = sensor_preset(spec.sensor), np.random.default_rng(_sensor_seed(spec))
         self.color_rng = np.random.default_rng((_sensor_seed(spec), 1))
         """Colour noise has its own stream, so the depth noise of a run does not depend on whether colour is used."""
@@ -271,7 +272,8 @@ class _TopView:
         noisy, color = self._sense(rgb, depth)
         blobs = segment_depth(noisy, self.background.depth, self.segmentation, color, self.background.color)
         update = self.tracker.update(blobs, now)
-        observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen) for t in update.active]
+        observations = [TrackObservation(t.track_id, t.lane, belt_outline(t.blob.contour, noisy, self.k, self.height),
+                                         t.unseen) for t in update.active]
         for graded in self.grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
             self.results.setdefault(graded.lane, _shape_row(graded))
 

@@ -1,6 +1,6 @@
 """One picture per graded fillet, from a recorded bag: why it was graded so (`woody report BAG`, `woody run`).
 
-Drawn from the grader's overlay messages (grading/markers, see woody_vision.overlays), so the picture shows
+Drawn from the grader's annotations (grading/annotations, see woody_vision.annotations), so the picture shows
 what a Foxglove user sees: the colour crop at the reference frame and at the measuring-point frame, each with
 both outlines, and Φ_t of every scored frame against the reject cut, the verdict's score at the measuring point.
 """
@@ -16,11 +16,12 @@ import numpy as np
 from woody_bag.reader import read_bag
 from woody_bag.schemas import decode
 from woody_bag.summary import bag_topics
+from woody_common import topics
 from woody_common.stamps import stamp_to_seconds
+from woody_vision.annotations import overlays_of
 from woody_vision.image_encodings import color_rgb
-from woody_vision.overlays import FRAME, MEASURED, REFERENCE, Overlay, parse_ns
+from woody_vision.overlays import FRAME, MEASURED, REFERENCE, Overlay
 
-MARKERS = "/grading/markers"
 COLOUR = "/top_camera/color/image_raw"
 MARGIN_PX = 20
 FOLDER = "fillets"
@@ -29,12 +30,9 @@ FOLDER = "fillets"
 def read_overlays(bag: Path) -> dict[int, list[Overlay]]:
     """Every overlay the grader recorded, by track id (the verdict's fillet_id)."""
     by_id: dict[int, list[Overlay]] = defaultdict(list)
-    wanted = [t for t in bag_topics(bag) if t.endswith(MARKERS)]
+    wanted = [t for t in bag_topics(bag) if t.endswith("/" + topics.ANNOTATIONS)]
     for _topic, type_name, data, _log_time in read_bag(bag, topics=wanted):
-        msg = decode(type_name, data)
-        points = np.array([(p.x, p.y) for p in msg.points], np.float64).reshape(-1, 2)
-        overlay = parse_ns(msg.ns, stamp_to_seconds(msg.header.stamp), points)
-        if overlay is not None:
+        for overlay in overlays_of(decode(type_name, data)):
             by_id[overlay.track_id].append(overlay)
     return dict(by_id)
 
@@ -62,7 +60,7 @@ def write_fillet_pictures(bag: Path, out_dir: Path) -> list[str]:
     (out_dir / FOLDER).mkdir(parents=True, exist_ok=True)
     lines = ["## Each fillet", "", "Colour crops at the reference frame and at the measuring point, the reference "
              "outline in cyan and the measuring-point outline in the verdict's colour; right, Φ_t of each scored "
-             "frame against the reject cut (the grader's overlays, grading/markers).", ""]
+             "frame against the reject cut (the grader's annotations, grading/annotations).", ""]
     for track_id, kinds in sorted(verdicts.items()):
         name = f"{FOLDER}/fillet-{track_id}.png"
         trace = [(o.stamp, o.phi) for o in overlays[track_id] if o.kind == FRAME and math.isfinite(o.phi)]

@@ -21,15 +21,17 @@ from types import SimpleNamespace
 
 import numpy as np
 import rclpy
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import TransformStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
+from tf2_msgs.msg import TFMessage
 
 from woody_common import topics
+from woody_common.diagnostics import OK, WARN, DiagnosticsPublisher, Health
 from woody_common.images import image_message
 from woody_common.line import (
     BELT_MARGIN_M,
@@ -79,8 +81,12 @@ from woody_sim.spawn_schedule import SpawnSchedule
 from woody_sim.split_world import MAX_PHYSICS_WORKERS, SplitLineWorld
 
 WORLD_FRAME = "world"
+"""REP 103: x downstream along the flow, z up, the origin on the belt surface at the roller edge, mid-belt."""
+ROLLER_FRAME = "roller"
+"""The end roller's axle (x along the flow, as the world frame)."""
 TOP_FRAME = "top_camera_optical_frame"
 SIDE_FRAME = "side_camera_optical_frame"
+"""Optical frames (REP 103): z along the optical axis, x right and y down in the image."""
 SENSOR_STREAM = 11
 """Second seed word of the camera error model's random stream (the first is the node's ``seed``)."""
 CLOCK_PERIOD = 0.005
@@ -288,20 +294,34 @@ class LineSim(Node):
         self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
         self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
         self.create_service(SpawnFillet, "spawn_fillet", self.on_spawn_request)
-        self.pose_pubs = [self.create_publisher(PoseStamped, f"{name}/pose", latched)
-                          for name in ("top_camera", "side_camera")]
+        tf_static = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.tf_static_pub = self.create_publisher(TFMessage, "tf_static", tf_static)
         self._line_publishers = [self.clock_pub, self.truth_pub, self.color_pub, self.depth_pub, self.color_info_pub,
-                                 self.depth_info_pub, self.side_pub, self.side_info_pub, *self.pose_pubs]
-        for publisher, camera in zip(self.pose_pubs, (self.geometry.top_camera(), self.geometry.side_camera())):
-            publisher.publish(_camera_pose(camera))
+                                 self.depth_info_pub, self.side_pub, self.side_info_pub, self.tf_static_pub]
+        self.tf_static_pub.publish(static_transforms(self.geometry))
         self.pacers: dict[str, LeadLimiter] = {}
         """Consumers the line keeps within max_lead_s of: the segmenter's tracks and, when waited for, the
         recorder's written clock."""
+        self.waiting_for = "the line to start"
+        """What holds the line now ("" when it runs): /diagnostics and woody run's progress line say it."""
+        self._started = (time.monotonic(), 0.0)  # wall and sim time when the line started
+        self.diagnostics = DiagnosticsPublisher(self, self.health)
         if p.max_lead > 0:
             self._pace_on("/vision/tracks", p.max_lead, FilletTrackArray, topics.TRACKS,
                           lambda m: m.header.stamp, QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
             if self.wait_recorder:
                 self._pace_on("the recorder", p.max_lead, Clock, topics.RECORDED_CLOCK, lambda m: m.clock, 10)
+
+    def health(self) -> Health:
+        """A line held by a consumer (or waiting to start) is a warning that names it."""
+        wall = time.monotonic() - self._started[0]
+        values = {"sim time (s)": self.world.time, "fillets spawned": self.spawned,
+                  "real-time factor": (self.world.time - self._started[1]) / max(wall, 1e-9),
+                  "waiting for": self.waiting_for or "nothing"}
+        if self.waiting_for:
+            return Health(WARN, f"waiting for {self.waiting_for}", values)
+        return Health(OK, f"running, sim time {self.world.time:.1f} s, {self.spawned} fillets spawned", values)
 
     def _pace_on(self, name: str, max_lead: float, msg_type, topic: str, stamp_of, qos) -> None:
         pacer = self.pacers[name] = LeadLimiter(max_lead)
@@ -405,7 +425,8 @@ class LineSim(Node):
         frames, next_clock = FrameSchedule(self.top_period, self.side_period), 0.0
         in_flight: deque[float] = deque()  # sim stamps of the frames the renderer is working on, oldest first
         phases = PhaseClock()
-        wall_start, sim_start = time.monotonic(), self.world.time
+        wall_start, sim_start = self._started = time.monotonic(), self.world.time
+        self.waiting_for = ""
         while not stop.is_set():
             self._spawn_due()
             phases.lap("spawn")
@@ -479,7 +500,10 @@ class LineSim(Node):
         """With max_lead_s: wait (serving callbacks) until every paced consumer has caught up to within the lead."""
         stalls = {name: pacer.stalls for name, pacer in self.pacers.items()}
         while not self._stop.is_set() and any(pacer.must_wait(now) for pacer in self.pacers.values()):
+            self.waiting_for = " and ".join(name for name, pacer in self.pacers.items()
+                                            if now - pacer.acked > pacer.max_lead_s)
             executor.spin_once(timeout_sec=0.005)
+        self.waiting_for = ""
         for name, pacer in self.pacers.items():
             if pacer.stalls > stalls[name] and pacer.stalls == 1:
                 self.get_logger().warning(f"{name} silent: running on without it until it answers")
@@ -490,9 +514,10 @@ class LineSim(Node):
                                       (self.side_pub, self.wait_side_subscribers)) if n]
         if not (wanted or self.wait_recorder):
             return
-        self.get_logger().info("waiting for subscribers: " + ", ".join(
+        self.waiting_for = "subscribers: " + ", ".join(
             [f"{n} on {p.topic_name}" for p, n in wanted] + ([f"{self.wait_recorder} on every topic of this node"]
-                                                             if self.wait_recorder else [])))
+                                                             if self.wait_recorder else []))
+        self.get_logger().info(f"waiting for {self.waiting_for}")
         waited = time.monotonic()
         while not self._stop.is_set() and (any(p.get_subscription_count() < n for p, n in wanted)
                                            or not self._recorder_listens()):
@@ -525,18 +550,24 @@ def _check_rate(rate: float, speed_fpm: float) -> None:
                          f"most {max_fillets_per_minute(speed):.0f} per minute")
 
 
-def _camera_pose(camera) -> PoseStamped:
-    """The camera's optical frame in the world frame (x downstream, z up, the roller edge at x = 0).
+def _transform(child: str, position, rotation) -> TransformStamped:
+    """``child`` in the world frame: its origin at ``position`` (m), its axes the columns of ``rotation``."""
+    transform = TransformStamped()
+    transform.header.frame_id, transform.child_frame_id = WORLD_FRAME, child
+    t = transform.transform.translation
+    t.x, t.y, t.z = (float(c) for c in position)
+    q = transform.transform.rotation
+    q.x, q.y, q.z, q.w = (float(c) for c in Rotation.from_matrix(np.asarray(rotation, dtype=float)).as_quat())
+    return transform
 
-    Published latched instead of on /tf: tf2_msgs has no PyPI wheel (docs/architecture.md).
-    """
-    pose = PoseStamped()
-    pose.header.frame_id = WORLD_FRAME
-    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(c) for c in camera.position)
-    x, y, z, w = Rotation.from_matrix(np.asarray(camera.rotation, dtype=float)).as_quat()
-    pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z, pose.pose.orientation.w = (
-        float(x), float(y), float(z), float(w))
-    return pose
+
+def static_transforms(geometry: LineGeometry) -> TFMessage:
+    """The line's fixed frames for /tf_static: the roller axle and both cameras' optical frames in the world."""
+    axle_x, axle_z = geometry.roller_axle
+    transforms = [_transform(ROLLER_FRAME, (axle_x, 0.0, axle_z), np.eye(3))]
+    for frame, camera in ((TOP_FRAME, geometry.top_camera()), (SIDE_FRAME, geometry.side_camera())):
+        transforms.append(_transform(frame, camera.position, camera.rotation))
+    return TFMessage(transforms=transforms)
 
 
 def _camera_info(camera, frame_id: str) -> CameraInfo:

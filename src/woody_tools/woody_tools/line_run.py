@@ -132,6 +132,7 @@ class LineMonitor:
 
     def __init__(self, domain_id: int, namespace: str = "") -> None:
         import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
@@ -160,11 +161,27 @@ class LineMonitor:
         start-up. Sim time is followed by the frames' 30 Hz camera_info, not /clock's 200+ Hz: each message costs
         this process a callback."""
         self.last_frame: tuple[float, float] | None = None
+        self.health: dict[str, tuple[int, str]] = {}
+        """Node name -> (level, message) of its latest /diagnostics status."""
+        self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, 50)
         self.node.create_subscription(FilletSpawn, topics.GROUND_TRUTH, self._on_spawn, latched)
         self.node.create_subscription(FilletVerdict, topics.VERDICTS, self._on_verdict, reliable)
         self.node.create_subscription(SideMetrics, topics.SIDE_METRICS, self._on_side, reliable)
         self.node.create_subscription(GateCommand, topics.GATE_COMMANDS, self._on_gate, reliable)
         self.node.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self._on_frame, 10)
+
+    def _on_diagnostics(self, msg) -> None:
+        for status in msg.status:
+            self.health[status.name.rsplit("/", 1)[-1]] = (status.level[0], status.message)
+
+    def holding_up(self) -> list[str]:
+        """What holds the line up now, by its nodes' diagnostics: what line_sim waits for, and every node in
+        error (e.g. waiting for camera_info)."""
+        from diagnostic_msgs.msg import DiagnosticStatus
+
+        error, warn = DiagnosticStatus.ERROR[0], DiagnosticStatus.WARN[0]
+        return [f"{name}: {message}" for name, (level, message) in sorted(self.health.items())
+                if level >= error or (name == "line_sim" and level == warn)]
 
     def _on_spawn(self, msg) -> None:
         self.spawns.append(spawn_from_msg(msg))
@@ -314,6 +331,7 @@ def node_parameters(args: argparse.Namespace, fillets: int | None, out: Path) ->
         "grader": _grader_params(args, vision_params),
         "reject_gate": {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm,
                         "gate_distance_m": [args.gate_distance], "divert_unscored": True},
+        **({"foxglove_view": {"use_sim_time": True, "port": args.live}} if args.live is not None else {}),
         "line_sim": _sim_params(args, fillets),
     }
 
@@ -396,8 +414,8 @@ def _watch(monitor: LineMonitor, nodes: list[NodeProcess], fillets: int | None, 
             cpu.sample()
             graded = len(monitor.verdicts)
             elapsed = time.monotonic() - wall_start
-            status = (f"spawned {len(monitor.spawns)}, sim {monitor.sim_time:.1f} s, "
-                      f"rtf {monitor.sim_time / max(elapsed, 1e-9):.2f}x")
+            status = "; ".join([f"spawned {len(monitor.spawns)}, sim {monitor.sim_time:.1f} s, "
+                                f"rtf {monitor.sim_time / max(elapsed, 1e-9):.2f}x", *monitor.holding_up()])
             if bar.disable and time.monotonic() - last_line >= 10.0:  # not a terminal: a plain line now and then
                 print(f"graded {graded}/{fillets or '?'} fillets, {status}", file=sys.stderr, flush=True)
                 last_line = time.monotonic()
@@ -429,6 +447,10 @@ def _run_line(args: argparse.Namespace, fillets: int | None, out: Path, monitor:
     cpu = reason = None
     try:
         nodes = _start_nodes(args, fillets, out, monitor.domain_id)
+        if args.live is not None:
+            where = f"ws://127.0.0.1:{args.live}" if args.live else f"the port {out / 'logs/foxglove_view.log'} names"
+            print(f"live view: Foxglove → Open connection → Foxglove WebSocket → {where} (layout: "
+                  "docs/foxglove-layout.json)", file=sys.stderr, flush=True)
         cpu = CpuAccounting({"woody run": os.getpid(), **{n.name: n.process.pid for n in nodes}})
         wall_start = time.monotonic()
         reason = _watch(monitor, nodes, fillets, args, cpu)

@@ -9,10 +9,17 @@ nodes, the experiment runner and the tests agree on the same numbers.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+DEPTH_WINDOW_POINTS = 9
+"""Contour points whose depth readings give one point's depth in :func:`belt_outline`."""
+MAX_DROP_M = 0.12
+"""Lowest a fillet's outline hangs below the belt while it is scored (its window closes when about half of a
+0.17-0.22 m body is past the edge); a deeper reading at its border is the floor behind it, mixed in."""
 
 
 @dataclass(frozen=True)
@@ -60,6 +67,46 @@ def pixel_to_belt(
     if np.ndim(flow_m) == 0:
         return float(flow_m), float(across_m)
     return flow_m, across_m
+
+
+def belt_outline(contour: np.ndarray, depth: np.ndarray, k: Sequence[float] | np.ndarray | Intrinsics,
+                 camera_height_m: float, window: int = DEPTH_WINDOW_POINTS) -> np.ndarray:
+    """A contour with the perspective of height taken out: each point where the camera would see its 3D point
+    (at the z-depth under it) if that point lay on the belt plane, in pixels (int32, (N, 2)).
+
+    A fillet bending down over the roller edge hangs below the belt; off the optical axis the camera sees the
+    hanging part pulled towards the image centre by its drop / camera height times its distance from the axis,
+    so one bend looks different in an outer lane than in the centre, and a turned fillet differently on either
+    side of the axis. On this outline the shape change is the fillet's own. Each point's depth is the median
+    of the valid readings of the ``window`` contour points around it: a real camera's flying pixels and holes
+    at an object's border are single points, the part hanging over the edge a stretch of them. A reading
+    more than `MAX_DROP_M` below the belt is not valid (the floor behind the fillet), nor is NaN or 0; a
+    point with no valid reading around it keeps its place.
+    """
+    intr = intrinsics_from_k(k)
+    points = np.asarray(contour).reshape(-1, 2)
+    rows = np.clip(points[:, 1], 0, depth.shape[0] - 1)
+    cols = np.clip(points[:, 0], 0, depth.shape[1] - 1)
+    z = depth[rows, cols].astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        z[~((z > 0.0) & (z <= camera_height_m + MAX_DROP_M))] = np.nan
+    z = _along_contour_median(z, window)
+    scale = np.where(np.isfinite(z), z, camera_height_m) / camera_height_m
+    u = intr.cx + (points[:, 0] - intr.cx) * scale
+    v = intr.cy + (points[:, 1] - intr.cy) * scale
+    return np.round(np.stack([u, v], axis=1)).astype(np.int32)
+
+
+def _along_contour_median(values: np.ndarray, window: int) -> np.ndarray:
+    """The NaN-ignoring median of each value and its neighbours on a closed contour (``window`` points)."""
+    if len(values) < window or window < 2:
+        return values
+    half = window // 2
+    ring = np.concatenate([values[-half:], values, values[:half]])
+    windows = np.lib.stride_tricks.sliding_window_view(ring, 2 * half + 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a window of holes only stays NaN
+        return np.nanmedian(windows, axis=1)
 
 
 def lane_center_u(

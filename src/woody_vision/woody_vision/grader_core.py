@@ -171,6 +171,11 @@ class FilletGrader:
         """Tracks that ended after fewer than MIN_SIGHTINGS frames (a fillet's first sightings at the image border
         before a burst of lost frames, noise): no verdict, like a tentative track in SORT-style trackers."""
 
+    @property
+    def in_progress(self) -> int:
+        """Fillets being scored now: each one's verdict is still to come."""
+        return len(self._evaluators)
+
     def reset(self) -> tuple[int, int]:
         """Forget every fillet (evaluators, fillets waiting for their side result, side measurements) and the
         time: sim time went back, and what was in progress belongs to a timeline that is gone. Returns (tracks,

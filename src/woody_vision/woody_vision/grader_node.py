@@ -30,14 +30,13 @@ from collections import deque
 
 import cv2
 import numpy as np
-from geometry_msgs.msg import Point
+from foxglove_msgs.msg import ImageAnnotations
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import ColorRGBA, Header
-from visualization_msgs.msg import ImageMarker
 
 from woody_common import topics
+from woody_common.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher, Health
 from woody_common.line import (
     LANES,
     MAX_LANES,
@@ -51,6 +50,7 @@ from woody_common.ros_params import calibrated_defaults, declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletTrackArray, FilletVerdict, SideMetrics
 from woody_vision import side_view
+from woody_vision.annotations import image_annotations
 from woody_vision.camera_model import edge_row
 from woody_vision.frame_checks import FrameChecker, FrameError, SimTimeWatch, watch_clock
 from woody_vision.grader_core import (
@@ -66,19 +66,10 @@ from woody_vision.grader_core import (
 from woody_vision.grading import THRESHOLD_RANGE, Cut, FilletConditions, FittedRange, GradingRules
 from woody_vision.image_encodings import color_rgb
 from woody_vision.image_qos import declare_image_qos
-from woody_vision.overlays import FRAME, REFERENCE, Overlay, outline, verdict_overlays
+from woody_vision.overlays import FRAME, Overlay, outline, verdict_overlays
 from woody_vision.shape_score import LINE_OVERHANG_FRACTION, TIP_WIDTH_RATIO, W1, W2
 from woody_vision.side_view import SidePassageTracker
 
-MARKER_COLOURS = {"pending": ColorRGBA(r=1.0, g=0.85, b=0.0, a=1.0), "normal": ColorRGBA(g=0.8, a=1.0),
-                  "woody": ColorRGBA(r=1.0, a=1.0), "unscored": ColorRGBA(r=0.6, g=0.6, b=0.6, a=1.0)}
-"""Contour colours on the image: yellow until graded, then green normal, red woody, grey unscored."""
-MARKER_LIFETIME_NS = 200_000_000
-"""A marker outlives its frame by a few frames, so a viewer never flickers, and vanishes with the fillet."""
-REFERENCE_COLOUR = ColorRGBA(g=0.8, b=1.0, a=1.0)
-"""The reference outline a verdict publishes (cyan); its measuring-point outline has the verdict's colour."""
-VERDICT_LIFETIME_S = 2
-"""The verdict's outlines stay this long (s), so a viewer can read them after the fillet fell."""
 LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY,
           "unscored": FilletVerdict.CLASS_UNSCORED}
 
@@ -118,18 +109,20 @@ class Grader(Node):
         self.sim_time = SimTimeWatch()
         self.clock_jumps = watch_clock(self, self.sim_time, self.forget)
         self.published = 0
+        self.unscored = 0
         self.side_published = 0
-        markers = declare(self, "publish_markers", True, "Publish grading/markers (visualization_msgs/ImageMarker: "
-                          "each track's contour on the top image, coloured by its verdict and labelled in ns with id, "
-                          "lane and Φ_t; at its verdict the reference outline and the outline at the measuring "
-                          "point, labelled with score and cut) for Foxglove and `woody report`.")
+        annotate = declare(self, "publish_annotations", True, "Publish grading/annotations (foxglove_msgs/"
+                           "ImageAnnotations, one per top frame: each track's outline coloured by its state with a "
+                           "label of id, lane and Φ_t; at its verdict the reference outline and the outline at the "
+                           "measuring point, labelled with score and cut) for Foxglove and `woody report`.")
         self.labels: dict[int, str] = {}
 
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         sensor = declare_image_qos(self)
         self.verdict_pub = self.create_publisher(FilletVerdict, topics.VERDICTS, reliable)
         self.side_pub = self.create_publisher(SideMetrics, topics.SIDE_METRICS, reliable) if self.side else None
-        self.marker_pub = self.create_publisher(ImageMarker, "grading/markers", 50) if markers else None
+        self.annotation_pub = (self.create_publisher(ImageAnnotations, topics.ANNOTATIONS, 50) if annotate
+                               else None)
         self.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self.on_camera_info, sensor)
         self.create_subscription(FilletTrackArray, topics.TRACKS, self.on_tracks,
                                  QoSProfile(depth=topics.TRACKS_QUEUE_DEPTH))
@@ -139,6 +132,19 @@ class Grader(Node):
         self.create_timer(0.1, self.on_timer)
         self.frame_id = ""
         self.side_frame_id = ""
+        self.diagnostics = DiagnosticsPublisher(self, self.health)
+
+    def health(self) -> Health:
+        """Waiting for camera_info is an error (nothing is graded); unscored fillets (diverted) and rejected
+        side frames are warnings."""
+        values = {"verdicts": self.published, "unscored": self.unscored, "side metrics": self.side_published,
+                  "tracks in progress": self.core.in_progress if self.core else 0,
+                  "track messages waiting for camera_info": len(self.early_tracks),
+                  "side frames rejected": self.side_checker.rejected}
+        if self.core is None:
+            return Health(ERROR, f"waiting for camera_info on {topics.TOP_DEPTH_INFO}", values)
+        line = f"{self.published} verdicts, {self.unscored} unscored"
+        return Health(WARN if self.unscored or self.side_checker.rejected else OK, line, values)
 
     def _declare_side_view(self) -> SidePassageTracker | None:
         """Declare the lanes and the side view's parameters; its passage tracker (None with the side view off)."""
@@ -210,19 +216,20 @@ class Grader(Node):
         stamp = stamp_to_seconds(msg.header.stamp)
         if self.sim_time.went_back("tracks", stamp):
             self.forget(f"{topics.TRACKS} stamp went back to {stamp:.2f} s")
-        odd = [t.id for t in msg.tracks if len(t.contour_uv) % 2]
-        if odd:
-            self.side_checker.reject(f"tracks {odd}: contour_uv of odd length (u, v pairs expected); those skipped")
-        tracks = [TrackObservation(t.id, t.lane, np.frombuffer(t.contour_uv, np.int32).reshape(-1, 2), t.unseen)
-                  for t in msg.tracks if len(t.contour_uv) >= 6 and len(t.contour_uv) % 2 == 0]
-        self._publish(self.core.on_tracks(stamp, tracks, msg.ended_ids))
+        usable = [t for t in msg.tracks if _outline_ok(t.contour_uv) and _outline_ok(t.belt_contour_uv)]
+        if len(usable) < len(msg.tracks):
+            bad = sorted(set(t.id for t in msg.tracks) - set(t.id for t in usable))
+            self.side_checker.reject(f"tracks {bad}: contour_uv or belt_contour_uv not u, v pairs of at least 3 "
+                                     "points; those skipped")
+        tracks = [TrackObservation(t.id, t.lane, _points(t.belt_contour_uv), t.unseen) for t in usable]
+        graded = self.core.on_tracks(stamp, tracks, msg.ended_ids)
+        self._publish(graded)
         self._publish_side(self.core.release(stamp))
-        if self.marker_pub is not None:
-            for track in tracks:
-                label = self.labels.get(track.track_id, "pending")
-                overlay = Overlay(track.track_id, track.lane, label, FRAME, stamp, outline(track.contour),
-                                  phi=self.core.frame_phi(track.track_id, stamp))
-                self.marker_pub.publish(self._marker(msg.header, overlay))
+        if self.annotation_pub is not None:
+            overlays = [Overlay(t.id, t.lane, self.labels.get(t.id, "pending"), FRAME, stamp,
+                                outline(_points(t.contour_uv)), phi=self.core.frame_phi(t.id, stamp)) for t in usable]
+            overlays += [overlay for fillet in graded for overlay in verdict_overlays(fillet)]
+            self.annotation_pub.publish(image_annotations(overlays, stamp))
 
     def on_side_image(self, msg: Image) -> None:
         stamp = stamp_to_seconds(msg.header.stamp)
@@ -262,9 +269,7 @@ class Grader(Node):
         for fillet in graded:
             self.verdict_pub.publish(self.to_msg(fillet))
             self.published += 1
-            if self.marker_pub is not None:
-                for overlay in verdict_overlays(fillet):
-                    self.marker_pub.publish(self._marker(Header(frame_id=self.frame_id), overlay))
+            self.unscored += fillet.label == "unscored"
             self.labels[fillet.fillet_id] = fillet.label
             while len(self.labels) > 200:  # only fillets still in view are drawn
                 self.labels.pop(next(iter(self.labels)))
@@ -282,19 +287,6 @@ class Grader(Node):
         msg.header.stamp = seconds_to_stamp(result.stamp)
         msg.header.frame_id = self.side_frame_id
         return msg
-
-    def _marker(self, header, overlay: Overlay) -> ImageMarker:
-        """One outline as an image annotation: ns is its label (woody_vision.overlays), id the track id."""
-        colour = REFERENCE_COLOUR if overlay.kind == REFERENCE else MARKER_COLOURS[overlay.label]
-        marker = ImageMarker(header=header, ns=overlay.ns, id=overlay.track_id, type=ImageMarker.POLYGON,
-                             action=ImageMarker.ADD, scale=2.0, outline_color=colour, filled=0)
-        if overlay.kind == FRAME:
-            marker.lifetime.nanosec = MARKER_LIFETIME_NS
-        else:
-            marker.header = Header(frame_id=header.frame_id, stamp=seconds_to_stamp(overlay.stamp))
-            marker.lifetime.sec = VERDICT_LIFETIME_S
-        marker.points = [Point(x=float(u), y=float(v)) for u, v in overlay.outline]
-        return marker
 
     def to_msg(self, fillet: GradedFillet) -> FilletVerdict:
         shape, nan = fillet.shape, math.nan
@@ -325,6 +317,15 @@ class Grader(Node):
 
 def _finite_or_nan(value: float) -> float:
     return float(value) if value is not None and math.isfinite(value) else math.nan
+
+
+def _outline_ok(flat) -> bool:
+    """A flat u, v array of at least three points."""
+    return len(flat) >= 6 and len(flat) % 2 == 0
+
+
+def _points(flat) -> np.ndarray:
+    return np.frombuffer(flat, np.int32).reshape(-1, 2)
 
 
 def main(args: list[str] | None = None) -> None:

@@ -1,12 +1,12 @@
-"""What the grader draws on the top image (grading/markers), as plain data both it and `woody report` share.
+"""What the grader draws on the top image (grading/annotations), as plain data both it and `woody report` share.
 
-ImageMarker has no text, so each marker's ``ns`` carries its label, ``/``-separated:
+Each outline goes out with a text label beside it (``foxglove_msgs/ImageAnnotations``: the i-th outline and
+the i-th label belong together), which a viewer draws and :func:`parse_text` reads back:
 
-- every frame, each track's contour: ``lane1/pending/id 7/Φ_t 0.0123`` (``Φ_t -`` when the frame was not scored);
-- at the verdict, two outlines stamped with their own frames: ``lane1/woody/id 7/reference/score 0.0456 cut
-  0.0600`` (the flat reference) and ``lane1/woody/id 7/measured/score ...`` (the frame nearest the measuring point).
-
-The first two fields (lane, verdict) are what a Foxglove user filters on; :func:`parse_ns` reads them all back.
+- every frame, each track's contour: ``7 lane 1 pending Φ_t 12.35`` (``Φ_t -`` when the frame was not scored);
+- at the verdict, two outlines of the frames they were taken from, drawn over the frame that closed the
+  window: ``7 lane 1 woody reference score 3.210 cut 5.100 frame 12.333333333 s`` (the flat reference) and
+  ``7 lane 1 woody measured score ... frame ... s`` (the frame nearest the measuring point).
 """
 
 from __future__ import annotations
@@ -42,11 +42,12 @@ class Overlay:
     """REFERENCE / MEASURED: the reject cut it was compared with."""
 
     @property
-    def ns(self) -> str:
-        head = f"lane{self.lane}/{self.label}/id {self.track_id}"
+    def text(self) -> str:
+        """The label drawn beside the outline (module doc)."""
+        head = f"{self.track_id} lane {self.lane} {self.label}"
         if self.kind == FRAME:
-            return f"{head}/Φ_t {_number(self.phi)}"
-        return f"{head}/{self.kind}/score {_number(self.score)} cut {_number(self.cut)}"
+            return f"{head} Φ_t {_number(self.phi)}"
+        return f"{head} {self.kind} score {_number(self.score)} cut {_number(self.cut)} frame {self.stamp:.9f} s"
 
 
 def outline(contour: np.ndarray) -> np.ndarray:
@@ -65,24 +66,26 @@ def verdict_overlays(graded) -> list[Overlay]:
     return out
 
 
-def parse_ns(ns: str, stamp: float, points: np.ndarray) -> Overlay | None:
-    """The overlay a marker's ``ns`` describes (None for a marker of another format)."""
-    parts = ns.split("/")
+def parse_text(text: str, stamp: float, points: np.ndarray) -> Overlay | None:
+    """The overlay a label describes (None for a label of another format); ``stamp`` is the annotation's, which a
+    verdict's outline replaces with its own frame's."""
+    words = text.split()
     try:
-        lane, label, track_id = int(parts[0].removeprefix("lane")), parts[1], int(parts[2].removeprefix("id "))
-        if len(parts) == 4 and parts[3].startswith("Φ_t "):
-            return Overlay(track_id, lane, label, FRAME, stamp, points, phi=_parse(parts[3].split()[1]))
-        if len(parts) == 5 and parts[3] in (REFERENCE, MEASURED):
-            words = parts[4].split()
-            return Overlay(track_id, lane, label, parts[3], stamp, points, score=_parse(words[1]),
-                           cut=_parse(words[3]))
+        track_id, lane, label = int(words[0]), int(words[2]), words[3]
+        if words[1] != "lane":
+            return None
+        if len(words) == 6 and words[4] == "Φ_t":
+            return Overlay(track_id, lane, label, FRAME, stamp, points, phi=_parse(words[5]))
+        if len(words) == 12 and words[4] in (REFERENCE, MEASURED):
+            return Overlay(track_id, lane, label, words[4], float(words[10]), points, score=_parse(words[6]),
+                           cut=_parse(words[8]))
     except (IndexError, ValueError):
         return None
     return None
 
 
 def _number(value: float) -> str:
-    return f"{value:.4f}" if math.isfinite(value) else "-"
+    return f"{value:.3f}" if math.isfinite(value) else "-"
 
 
 def _parse(text: str) -> float:

@@ -23,6 +23,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from woody_common import topics
+from woody_common.diagnostics import OK, WARN, DiagnosticsPublisher, Health
 from woody_common.line import LANES, MAX_LANES, REFERENCE_SPEED_FPM, SPEED_RANGE_FPM, fpm_to_mps
 from woody_common.ros_params import declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
@@ -57,6 +58,13 @@ class RejectGate(Node):
         self.create_subscription(FilletVerdict, topics.VERDICTS, self.on_verdict, reliable)
         self.sim_time = SimTimeWatch()
         self.clock_jumps = watch_clock(self, self.sim_time, self.time_went_back)
+        self.diagnostics = DiagnosticsPublisher(self, self.health)
+
+    def health(self) -> Health:
+        """Late commands are fillets the gate could not divert in time: a warning."""
+        counts = {"diverted": self.diverted, "late": self.late, "passed": self.passed}
+        line = f"{self.diverted} diverted, {self.late} late, {self.passed} passed"
+        return Health(WARN if self.late else OK, line, counts)
 
     def time_went_back(self, why: str) -> None:
         self.get_logger().warning(f"sim time went back ({why}): the verdicts that follow are timed on the new "

@@ -29,6 +29,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Empty
 
 from woody_common import topics
+from woody_common.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher, Health
 from woody_common.images import image_message
 from woody_common.line import (
     LANE_PITCH_M,
@@ -42,7 +43,7 @@ from woody_common.ros_params import declare, run_node
 from woody_common.stamps import stamp_to_nanoseconds, stamp_to_seconds
 from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 from woody_vision import segmentation
-from woody_vision.camera_model import LaneLayout
+from woody_vision.camera_model import LaneLayout, belt_outline
 from woody_vision.frame_checks import FrameChecker, FrameError, SimTimeWatch, watch_clock
 from woody_vision.frame_pairing import FramePairing, Pair
 from woody_vision.image_encodings import color_rgb, depth_metres, match_size
@@ -114,6 +115,21 @@ class Segmenter(Node):
             self.create_subscription(Image, topics.TOP_COLOR_IMAGE, self.on_color, sensor)
         if self.publish_debug:
             self.create_subscription(FilletVerdict, topics.VERDICTS, self.on_verdict, 50)
+        self.tracked = 0
+        self.diagnostics = DiagnosticsPublisher(self, self.health)
+
+    def health(self) -> Health:
+        """No camera_info or no frames is an error (nothing is tracked); skipped frames are warnings."""
+        values = {"depth frames": self.frames, "tracks in the latest frame": self.tracked,
+                  "frames skipped (bad or mismatched)": self.checker.rejected,
+                  "depth frames without their colour frame": self.without_color,
+                  "colour/depth pairs dropped": self.pairing.dropped if self.pairing else 0,
+                  "background learnt": self.background.ready}
+        if self.tracker is None or not self.frames:
+            what = topics.TOP_DEPTH_INFO if self.tracker is None else topics.TOP_DEPTH_IMAGE
+            return Health(ERROR, f"waiting for {what}", values)
+        skipped = self.checker.rejected + self.without_color
+        return Health(WARN if skipped else OK, f"{self.frames} depth frames, {skipped} skipped", values)
 
     def on_camera_info(self, info: CameraInfo) -> None:
         if self.tracker is None and info.k[0] > 0:
@@ -194,15 +210,19 @@ class Segmenter(Node):
         blobs = segment_depth(depth, self.background.depth, self.params, color, self.background.color)
         update = self.tracker.update(blobs, stamp_to_seconds(msg.header.stamp))
         out.ended_ids = [t.track_id for t in update.ended]
+        layout = self.tracker.lane_layout
         for track in update.active:
             blob = track.blob
             u, v, w, h = blob.bbox
+            belt = belt_outline(blob.contour, depth, layout.k, layout.camera_height_m)
             out.tracks.append(FilletTrack(
                 id=track.track_id, lane=max(track.lane, 0), centroid_u=float(blob.centroid[0]),
                 centroid_v=float(blob.centroid[1]), bbox_u=u, bbox_v=v, bbox_width=w, bbox_height=h,
                 area=float(blob.area_px), mean_height=float(blob.mean_height_m), age=track.age, unseen=track.unseen,
-                contour_uv=array.array("i", blob.contour.astype(np.int32).tobytes())))
+                contour_uv=array.array("i", blob.contour.astype(np.int32).tobytes()),
+                belt_contour_uv=array.array("i", belt.tobytes())))
         self.tracks_pub.publish(out)
+        self.tracked = len(out.tracks)
         if self.debug_pub is not None:
             self._publish_debug(msg, update.active, pair.color)
 

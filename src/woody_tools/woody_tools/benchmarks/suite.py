@@ -91,27 +91,61 @@ def bench_sim(seconds: float, lanes: int = LANES, speed_fpm: float = REFERENCE_S
     return figures
 
 
-def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, spawn_s: float = 10.0) -> dict:
+def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, spawn_s: float = 10.0,
+                live: bool = False) -> dict:
     """`woody run` (the whole graph with the recorder) at ``lanes`` and ``speed_fpm``, spawning for ``spawn_s`` sim
     seconds so the line runs full, as a subprocess: its speed, its node start-up, whether every fillet got its
-    verdict and whether the recorder lost anything."""
+    verdict and whether the recorder lost anything. With ``live``, the same line once more with ``--live`` and a
+    Foxglove client watching the colour image, the annotations and the verdicts: the view's cost to the line."""
+    line = ["--lanes", str(lanes), "--speed-fpm", f"{speed_fpm:g}", "--duration", f"{spawn_s:g}"]
+    figures = {"lanes": lanes, "speed_fpm": speed_fpm, **_graph_run(line, "woody_run")}
+    if live:
+        figures.update(_graph_run(line, "woody_run_live"))
+        figures["woody_run_live_rtf_ratio"] = figures["woody_run_live_line_rtf"] / figures["woody_run_line_rtf"]
+    return figures
+
+
+LIVE_WATCHED = {"/top_camera/color/image_raw", "/grading/annotations", "/grading/verdicts"}
+
+
+def _graph_run(line: list[str], name: str) -> dict:
+    """One `woody run` of ``line`` (with ``--live`` and a watching client when ``name`` ends in ``_live``)."""
+    from woody_bag.foxglove_client import Watcher
+
+    live = name.endswith("_live")
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run"
-        line = ["--lanes", str(lanes), "--speed-fpm", f"{speed_fpm:g}", "--duration", f"{spawn_s:g}"]
-        demo = subprocess.run([entry_point("woody"), "run", *line, "--out", str(out)], check=True,
-                              capture_output=True, text=True)
+        run = subprocess.Popen([entry_point("woody"), "run", *line, "--out", str(out), *(["--live", "0"] * live)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        watcher = Watcher(f"ws://127.0.0.1:{_view_port(out, run)}", LIVE_WATCHED) if live else None
+        stdout, stderr = run.communicate()
+        if run.returncode:
+            raise RuntimeError(f"woody run failed:\n{stderr[-2000:]}")
         with open(out / "verdicts.csv", newline="") as rows:
             fillets = list(csv.DictReader(rows))
-    graded = sum(1 for row in fillets if row["verdict"])
-    rtf = re.search(r"wall: rtf ([0-9.]+)x", demo.stdout)
-    started = re.search(r"the line itself, after ([0-9.]+) s of node start-up: rtf ([0-9.]+)x", demo.stdout)
+    rtf = re.search(r"wall: rtf ([0-9.]+)x", stdout)
+    started = re.search(r"the line itself, after ([0-9.]+) s of node start-up: rtf ([0-9.]+)x", stdout)
     if rtf is None or started is None:
-        raise RuntimeError(f"woody run did not report its speed:\n{demo.stdout[-2000:]}")
-    lost = re.search(r"recorder: ([0-9]+) messages lost", demo.stdout + demo.stderr)
-    return {"lanes": lanes, "speed_fpm": speed_fpm, "woody_run_fillets": len(fillets), "woody_run_verdicts": graded,
-            "woody_run_rtf": float(rtf.group(1)), "woody_run_line_rtf": float(started.group(2)),
-            "woody_run_startup_s": float(started.group(1)),
-            "woody_run_recorder_lost": int(lost.group(1)) if lost else 0}
+        raise RuntimeError(f"woody run did not report its speed:\n{stdout[-2000:]}")
+    lost = re.search(r"recorder: ([0-9]+) messages lost", stdout + stderr)
+    figures = {f"{name}_fillets": len(fillets), f"{name}_verdicts": sum(1 for row in fillets if row["verdict"]),
+               f"{name}_rtf": float(rtf.group(1)), f"{name}_line_rtf": float(started.group(2)),
+               f"{name}_startup_s": float(started.group(1)), f"{name}_recorder_lost": int(lost.group(1)) if lost else 0}
+    if watcher is not None:
+        watcher.join(30.0)
+        figures[f"{name}_client_frames"] = len(watcher.received["/top_camera/color/image_raw"])
+    return figures
+
+
+def _view_port(out: Path, run: subprocess.Popen, timeout_s: float = 120.0) -> int:
+    """The port the line's foxglove_view serves on, from its log."""
+    log, deadline = out / "logs" / "foxglove_view.log", time.monotonic() + timeout_s
+    while time.monotonic() < deadline and run.poll() is None:
+        found = re.findall(r"ws://127\.0\.0\.1:(\d+)", log.read_text()) if log.exists() else []
+        if found:
+            return int(found[0])
+        time.sleep(0.1)
+    raise RuntimeError(f"foxglove_view named no port within {timeout_s:g} s")
 
 
 def bench_sweep() -> dict:

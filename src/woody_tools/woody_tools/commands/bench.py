@@ -26,6 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frames", type=int, default=300, help="frames per vision timing run (default 300)")
     parser.add_argument("--lanes", type=LANE_COUNT, default=LANES,
                         help=f"lanes of the line `sim` and `graph` run (default {LANES})")
+    parser.add_argument("--live", action="store_true",
+                        help="graph: run the line a second time with --live and a Foxglove client watching")
     parser.add_argument("--speed-fpm", type=LINE_SPEED, default=REFERENCE_SPEED_FPM,
                         help=f"line speed of the line `sim` and `graph` run, in FPM (default {REFERENCE_SPEED_FPM:g})")
 
@@ -34,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
     reference = reference_ms()
     line = {"lanes": int(args.lanes), "speed_fpm": args.speed_fpm}
     benches = {"sim": lambda: bench_sim(args.seconds, **line),
-               "vision": lambda: bench_vision(args.frames, args.seconds), "graph": lambda: bench_graph(**line),
+               "vision": lambda: bench_vision(args.frames, args.seconds),
+               "graph": lambda: bench_graph(**line, live=args.live),
                "sweep": bench_sweep}
     figures = benches[args.target]()
     figures = {"reference_ms": reference, **with_reference(figures, 0.5 * (reference + reference_ms()))}

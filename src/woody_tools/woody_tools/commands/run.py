@@ -79,6 +79,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
     parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
                         help="top camera error model (docs/sensors.md); default ideal")
+    parser.add_argument("--live", type=int, nargs="?", const=8765, default=None, metavar="PORT",
+                        help="watch the line in Foxglove while it runs: serve it on ws://127.0.0.1:PORT (default "
+                             "8765; the foxglove_view node, docs/foxglove.md)")
     parser.add_argument("--namespace", default="", metavar="NS",
                         help="run the line under NS (topics NS/..., sim clock NS/clock), so several lines share a "
                              "ROS domain; default: the root namespace")
@@ -166,6 +169,8 @@ def _validate(args: argparse.Namespace) -> None:
         raise RunRefused(f"--k values must be finite and >= 0, got {' '.join(f'{k:g}' for k in args.k)}")
     if args.namespace and not re.fullmatch(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", args.namespace):
         raise RunRefused(f"--namespace must be a ROS name like /line2, got '{args.namespace}'")
+    if args.live is not None and not 0 <= args.live <= 65535:
+        raise RunRefused(f"--live PORT must be 0..65535 (0: any free port), got {args.live}")
     _validate_line(args)
     _validate_crowding(args)
     _validate_grading(args)

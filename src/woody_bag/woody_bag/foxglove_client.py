@@ -1,0 +1,68 @@
+"""A client of the Foxglove WebSocket protocol, written from the protocol: what a Foxglove app receives from
+``foxglove_view`` (tests and `woody bench graph --live` watch the line with it).
+
+Subprotocol ``foxglove.websocket.v1``: the server advertises channels in JSON (``advertise``: id, topic,
+schemaName, ...), the client subscribes by channel id, and the server sends each message as a binary frame
+(opcode 0x01, the uint32 subscription id, the uint64 log time, the payload).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import struct
+import threading
+from collections import defaultdict
+
+SUBPROTOCOL = "foxglove.websocket.v1"
+MESSAGE_DATA = 0x01
+HEADER = struct.Struct("<BIQ")
+"""Opcode, subscription id, log time (ns): what precedes a message's payload."""
+
+
+class Watcher:
+    """Watches ``topics`` on a Foxglove WebSocket server in a thread until the server closes the connection.
+
+    ``advertised`` maps every advertised topic to its schema name; ``received`` maps each watched topic to
+    its messages' payloads (CDR for a ROS 2 server), in arrival order.
+    """
+
+    def __init__(self, url: str, topics: set[str]) -> None:
+        self.url, self.topics = url, set(topics)
+        self.advertised: dict[str, str] = {}
+        self.received: dict[str, list[bytes]] = defaultdict(list)
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="foxglove-client", daemon=True)
+        self._thread.start()
+
+    def join(self, timeout: float) -> None:
+        self._thread.join(timeout)
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._watch())
+        except Exception as exc:  # noqa: BLE001 - the caller reads it
+            self.error = exc
+
+    async def _watch(self) -> None:
+        from tornado.websocket import websocket_connect
+
+        connection = await websocket_connect(self.url, subprotocols=[SUBPROTOCOL])
+        subscriptions: dict[int, str] = {}
+        while (frame := await connection.read_message()) is not None:
+            if isinstance(frame, str):
+                await self._on_json(connection, json.loads(frame), subscriptions)
+            elif frame[0] == MESSAGE_DATA:
+                _, subscription, _ = HEADER.unpack_from(frame)
+                self.received[subscriptions[subscription]].append(bytes(frame[HEADER.size:]))
+
+    async def _on_json(self, connection, message: dict, subscriptions: dict[int, str]) -> None:
+        if message.get("op") != "advertise":
+            return
+        for channel in message["channels"]:
+            self.advertised[channel["topic"]] = channel["schemaName"]
+            if channel["topic"] in self.topics and channel["topic"] not in subscriptions.values():
+                subscription = len(subscriptions) + 1
+                subscriptions[subscription] = channel["topic"]
+                await connection.write_message(json.dumps(
+                    {"op": "subscribe", "subscriptions": [{"id": subscription, "channelId": channel["id"]}]}))
