@@ -138,9 +138,9 @@ def test_line_sim_publishes_what_a_structured_light_camera_would(ros_node, ros_d
         assert sim.stop() == 0, sim.log_tail()
     assert 25 <= len(frames["depth"]) <= 31 and len(frames["color"]) == len(frames["depth"])
     (tf,) = static  # the camera 0.75 m over the belt, its optical axis (z) pointing down, image rows downstream
-    frames = {t.child_frame_id: t for t in tf.transforms}
-    assert set(frames) == {"roller", "top_camera_optical_frame", "side_camera_optical_frame"}
-    top = frames["top_camera_optical_frame"]
+    fixed = {t.child_frame_id: t for t in tf.transforms}
+    assert set(fixed) == {"roller", "top_camera_optical_frame", "side_camera_optical_frame"}
+    top = fixed["top_camera_optical_frame"]
     assert top.header.frame_id == "world" and top.transform.translation.z == pytest.approx(0.75)
     q = top.transform.rotation
     axes = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()

@@ -1,7 +1,8 @@
 """A client of the Foxglove WebSocket protocol, written from the protocol: what a Foxglove app receives from
 ``foxglove_view`` (tests and `woody bench graph --live` watch the line with it).
 
-Subprotocol ``foxglove.websocket.v1``: the server advertises channels in JSON (``advertise``: id, topic,
+Subprotocol ``foxglove.sdk.v1`` (foxglove-sdk's servers; ``foxglove.websocket.v1``, foxglove_bridge's, is
+offered too): the server advertises channels in JSON (``advertise``: id, topic,
 schemaName, ...), the client subscribes by channel id, and the server sends each message as a binary frame
 (opcode 0x01, the uint32 subscription id, the uint64 log time, the payload).
 """
@@ -14,7 +15,7 @@ import struct
 import threading
 from collections import defaultdict
 
-SUBPROTOCOL = "foxglove.websocket.v1"
+SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 0x01
 HEADER = struct.Struct("<BIQ")
 """Opcode, subscription id, log time (ns): what precedes a message's payload."""
@@ -47,7 +48,7 @@ class Watcher:
     async def _watch(self) -> None:
         from tornado.websocket import websocket_connect
 
-        connection = await websocket_connect(self.url, subprotocols=[SUBPROTOCOL])
+        connection = await websocket_connect(self.url, subprotocols=SUBPROTOCOLS)
         subscriptions: dict[int, str] = {}
         while (frame := await connection.read_message()) is not None:
             if isinstance(frame, str):

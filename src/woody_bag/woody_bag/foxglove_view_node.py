@@ -71,7 +71,7 @@ class FoxgloveView(Node):
                                             server_listener=self.watching)
         self.channels: dict[str, tuple[foxglove.Channel, str]] = {}
         self.watchers: dict[str, int] = {}
-        self.subscriptions: dict[str, object] = {}
+        self.forwarding: dict[str, object] = {}
         self._time_sent = 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(period, self.discover, clock=steady)
@@ -81,7 +81,10 @@ class FoxgloveView(Node):
                                f"{1.0 / self.image_period:g} Hz per topic)")
 
     def discover(self) -> None:
-        """Offer every new topic of an importable type as a channel (the clock is always followed)."""
+        """Offer every new topic of an importable type as a channel (the clock is always followed); forward a
+        watched topic whose first publisher has come since it was watched."""
+        for topic in [t for t, n in self.watchers.items() if n and t not in self.forwarding]:
+            self._subscribe(topic)
         for topic, types in self.get_topic_names_and_types():
             if topic in self.channels or len(types) != 1 or self.exclude.search(topic):
                 continue
@@ -103,16 +106,16 @@ class FoxgloveView(Node):
                 return
             self.watchers[topic] = max(0, self.watchers.get(topic, 0) + change)
             _, type_name = self.channels.get(topic, (None, ""))
-            if self.watchers[topic] and topic not in self.subscriptions:
+            if self.watchers[topic] and topic not in self.forwarding:
                 self._subscribe(topic)
-            elif not self.watchers[topic] and topic in self.subscriptions and type_name != CLOCK_TYPE:
-                self.destroy_subscription(self.subscriptions.pop(topic))
+            elif not self.watchers[topic] and topic in self.forwarding and type_name != CLOCK_TYPE:
+                self.destroy_subscription(self.forwarding.pop(topic))
 
     def _subscribe(self, topic: str) -> None:
         channel, type_name = self.channels[topic]
         publishers = self.get_publishers_info_by_topic(topic)
         if not publishers:
-            return  # gone again: a client may watch it once it is back
+            return  # only subscribers so far: its publishers' QoS is not known yet (discover() tries again)
         clock, last = self.get_clock(), [0.0]
 
         def forward(data: bytes) -> None:
@@ -125,7 +128,7 @@ class FoxgloveView(Node):
                 self._broadcast_time(data)
             channel.log(data, log_time=clock.now().nanoseconds)
 
-        self.subscriptions[topic] = self.create_subscription(
+        self.forwarding[topic] = self.create_subscription(
             message_class(type_name), topic, forward, subscription_qos(publishers, QUEUE_DEPTH), raw=True)
 
     def _broadcast_time(self, data: bytes) -> None:

@@ -74,9 +74,10 @@ class CpuAccounting:
         lines = [f"CPU per node over {wall_s:.1f} s wall ({total:.1f} CPU-s in all, "
                  f"{100.0 * total / max(2.0 * wall_s, 1e-9):.0f} % of 2 cores):"]
         children = self.children()
+        width = max((len(name) for name, _ in per), default=12)
         for name, cpu in per:
             part = ", ".join(f"{command} {seconds:.1f} s" for command, seconds in children.get(name, {}).items())
-            lines.append(f"  {name:<12} {cpu:7.1f} s  {100.0 * cpu / max(total, 1e-9):5.1f} %"
+            lines.append(f"  {name:<{width}} {cpu:7.1f} s  {100.0 * cpu / max(total, 1e-9):5.1f} %"
                          + (f"  (child processes: {part})" if part else ""))
         return "\n".join(lines)
 
