@@ -89,6 +89,8 @@ SIDE_FRAME = "side_camera_optical_frame"
 """Optical frames (REP 103): z along the optical axis, x right and y down in the image."""
 SENSOR_STREAM = 11
 """Second seed word of the camera error model's random stream (the first is the node's ``seed``)."""
+HELD_WARN_S = 1.0
+"""A line held this long (wall s) by what it waits for says so on /diagnostics."""
 CLOCK_PERIOD = 0.005
 """Sim seconds between /clock messages (200 Hz) besides one per camera frame."""
 CHILD_START = "fork"
@@ -305,6 +307,7 @@ class LineSim(Node):
         recorder's written clock."""
         self.waiting_for = "the line to start"
         """What holds the line now ("" when it runs): /diagnostics and woody run's progress line say it."""
+        self._held_since = time.monotonic()
         self._started = (time.monotonic(), 0.0)  # wall and sim time when the line started
         self.diagnostics = DiagnosticsPublisher(self, self.health)
         if p.max_lead > 0:
@@ -314,13 +317,15 @@ class LineSim(Node):
                 self._pace_on("the recorder", p.max_lead, Clock, topics.RECORDED_CLOCK, lambda m: m.clock, 10)
 
     def health(self) -> Health:
-        """A line held by a consumer (or waiting to start) is a warning that names it."""
-        wall = time.monotonic() - self._started[0]
+        """A line held longer than `HELD_WARN_S` (a consumer silent, or waiting to start) is a warning that names
+        what it waits for; the brief holds of a paced line keeping in step with the vision are not."""
+        now = time.monotonic()
+        wall = now - self._started[0]
         values = {"sim time (s)": self.world.time, "fillets spawned": self.spawned,
                   "real-time factor": (self.world.time - self._started[1]) / max(wall, 1e-9),
                   "waiting for": self.waiting_for or "nothing"}
-        if self.waiting_for:
-            return Health(WARN, f"waiting for {self.waiting_for}", values)
+        if self.waiting_for and now - self._held_since >= HELD_WARN_S:
+            return Health(WARN, f"waiting for {self.waiting_for} ({now - self._held_since:.0f} s)", values)
         return Health(OK, f"running, sim time {self.world.time:.1f} s, {self.spawned} fillets spawned", values)
 
     def _pace_on(self, name: str, max_lead: float, msg_type, topic: str, stamp_of, qos) -> None:
@@ -499,6 +504,7 @@ class LineSim(Node):
     def _hold_for_consumer(self, executor, now: float) -> None:
         """With max_lead_s: wait (serving callbacks) until every paced consumer has caught up to within the lead."""
         stalls = {name: pacer.stalls for name, pacer in self.pacers.items()}
+        self._held_since = time.monotonic()
         while not self._stop.is_set() and any(pacer.must_wait(now) for pacer in self.pacers.values()):
             self.waiting_for = " and ".join(name for name, pacer in self.pacers.items()
                                             if now - pacer.acked > pacer.max_lead_s)

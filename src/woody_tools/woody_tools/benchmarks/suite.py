@@ -101,7 +101,7 @@ def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, spaw
     figures = {"lanes": lanes, "speed_fpm": speed_fpm, **_graph_run(line, "woody_run")}
     if live:
         figures.update(_graph_run(line, "woody_run_live"))
-        figures["woody_run_live_rtf_ratio"] = figures["woody_run_live_line_rtf"] / figures["woody_run_line_rtf"]
+        figures["woody_run_live_pace_ratio"] = figures["woody_run_live_line_rtf"] / figures["woody_run_line_rtf"]
     return figures
 
 
