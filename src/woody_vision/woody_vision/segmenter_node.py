@@ -102,11 +102,16 @@ class Segmenter(Node):
         self.info_size: tuple[int, int] | None = None
         self.pairing = FramePairing(sync) if self.params.color_threshold else None  # None: depth only, never waits
         self.without_color = 0
+        self.frames = 0
+        self.tracked = 0
+        self._create_interfaces()
+        self.diagnostics = DiagnosticsPublisher(self, self.health)
 
+    def _create_interfaces(self) -> None:
+        """The tracks (and debug image) publisher and the camera, reset and verdict subscriptions."""
         sensor = declare_image_qos(self)
         self.tracks_pub = self.create_publisher(FilletTrackArray, topics.TRACKS,
                                                 QoSProfile(depth=topics.TRACKS_QUEUE_DEPTH))
-        self.frames = 0
         self.debug_pub = self.create_publisher(Image, "vision/debug_image", 5) if self.publish_debug else None
         self.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self.on_camera_info, sensor)
         self.create_subscription(Image, topics.TOP_DEPTH_IMAGE, self.on_depth, sensor)
@@ -115,8 +120,6 @@ class Segmenter(Node):
             self.create_subscription(Image, topics.TOP_COLOR_IMAGE, self.on_color, sensor)
         if self.publish_debug:
             self.create_subscription(FilletVerdict, topics.VERDICTS, self.on_verdict, 50)
-        self.tracked = 0
-        self.diagnostics = DiagnosticsPublisher(self, self.health)
 
     def health(self) -> Health:
         """No camera_info or no frames is an error (nothing is tracked); skipped frames are warnings."""
