@@ -54,7 +54,7 @@ from woody_common.line import (
     max_fillets_per_minute,
     spacing_at_rate,
 )
-from woody_common.ros_params import calibrated_defaults, declare, run_node
+from woody_common.ros_params import calibrated_defaults, check_overrides, declare, run_node
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
@@ -106,6 +106,7 @@ class LineSim(Node):
         super().__init__("line_sim")
         p = self._declare_parameters()
         p.__dict__.update(vars(self._declare_line(p.lanes, p.speed_fpm)))
+        check_overrides(self)  # an unknown parameter is refused before any physics or render process starts
         self._build_line(p)
         self._create_interfaces(p)
         c = self.conditions
