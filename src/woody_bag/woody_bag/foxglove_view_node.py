@@ -81,10 +81,8 @@ class FoxgloveView(Node):
                                f"{1.0 / self.image_period:g} Hz per topic)")
 
     def discover(self) -> None:
-        """Offer every new topic of an importable type as a channel (the clock is always followed); forward a
-        watched topic whose first publisher has come since it was watched."""
-        for topic in [t for t, n in self.watchers.items() if n and t not in self.forwarding]:
-            self._subscribe(topic)
+        """Offer every new topic of an importable type as a channel, then forward each wanted topic (watched, or
+        the clock) whose first publisher has come: until then its QoS is not known."""
         for topic, types in self.get_topic_names_and_types():
             if topic in self.channels or len(types) != 1 or self.exclude.search(topic):
                 continue
@@ -94,8 +92,12 @@ class FoxgloveView(Node):
             except LookupError:
                 continue
             self.channels[topic] = (foxglove.Channel(topic, schema=schema, message_encoding="cdr"), types[0])
-            if types[0] == CLOCK_TYPE:
-                self._subscribe(topic)
+        for topic in [t for t in self.channels if self._wanted(t) and t not in self.forwarding]:
+            self._subscribe(topic)
+
+    def _wanted(self, topic: str) -> bool:
+        """A topic is forwarded while a client watches it; the clock always (it is the server's time)."""
+        return self.watchers.get(topic, 0) > 0 or self.channels[topic][1] == CLOCK_TYPE
 
     def follow_clients(self) -> None:
         """Subscribe a topic when its first client watches it, unsubscribe when its last one leaves."""
@@ -105,17 +107,18 @@ class FoxgloveView(Node):
             except queue.Empty:
                 return
             self.watchers[topic] = max(0, self.watchers.get(topic, 0) + change)
-            _, type_name = self.channels.get(topic, (None, ""))
-            if self.watchers[topic] and topic not in self.forwarding:
+            if topic not in self.channels:
+                continue
+            if self._wanted(topic) and topic not in self.forwarding:
                 self._subscribe(topic)
-            elif not self.watchers[topic] and topic in self.forwarding and type_name != CLOCK_TYPE:
+            elif not self._wanted(topic) and topic in self.forwarding:
                 self.destroy_subscription(self.forwarding.pop(topic))
 
     def _subscribe(self, topic: str) -> None:
         channel, type_name = self.channels[topic]
         publishers = self.get_publishers_info_by_topic(topic)
         if not publishers:
-            return  # only subscribers so far: its publishers' QoS is not known yet (discover() tries again)
+            return  # only subscribers so far: discover() tries again
         clock, last = self.get_clock(), [0.0]
 
         def forward(data: bytes) -> None:
