@@ -7,12 +7,11 @@ what a Foxglove app would receive.
 from __future__ import annotations
 
 import csv
-import re
 import subprocess
 
 import pytest
 
-from woody_bag.foxglove_client import Watcher
+from woody_bag.foxglove_client import Watcher, served_port
 from woody_bag.schemas import decode
 from woody_bag.summary import bag_summary
 from woody_tools.processes import entry_point, wait_for
@@ -31,14 +30,9 @@ def test_a_foxglove_client_watches_the_live_line(tmp_path):
                             "--live", "0", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True)
     log = out / "logs" / "foxglove_view.log"
-
-    def port() -> str | None:
-        found = re.findall(r"ws://127\.0\.0\.1:(\d+)", log.read_text()) if log.exists() else []
-        return found[0] if found else None
-
     try:
-        assert wait_for(lambda: port() is not None, timeout=120), log.read_text() if log.exists() else "no log"
-        client = Watcher(f"ws://127.0.0.1:{port()}", set(WATCHED))
+        assert wait_for(lambda: served_port(log) is not None, timeout=120), log.exists() and log.read_text()
+        client = Watcher(f"ws://127.0.0.1:{served_port(log)}", set(WATCHED))
         stdout, stderr = run.communicate(timeout=600)
     finally:
         run.kill()

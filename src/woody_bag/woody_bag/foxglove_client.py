@@ -11,14 +11,22 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 import struct
 import threading
 from collections import defaultdict
+from pathlib import Path
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 0x01
 HEADER = struct.Struct("<BIQ")
 """Opcode, subscription id, log time (ns): what precedes a message's payload."""
+
+
+def served_port(log: Path) -> int | None:
+    """The port a ``foxglove_view`` names in its log (``Foxglove view on ws://HOST:PORT``), None before it does."""
+    found = re.findall(r"Foxglove view on ws://[^:\s]+:(\d+)", log.read_text()) if log.exists() else []
+    return int(found[0]) if found else None
 
 
 class Watcher:

@@ -139,11 +139,13 @@ def _graph_run(line: list[str], name: str) -> dict:
 
 def _view_port(out: Path, run: subprocess.Popen, timeout_s: float = 120.0) -> int:
     """The port the line's foxglove_view serves on, from its log."""
-    log, deadline = out / "logs" / "foxglove_view.log", time.monotonic() + timeout_s
+    from woody_bag.foxglove_client import served_port
+
+    deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and run.poll() is None:
-        found = re.findall(r"ws://127\.0\.0\.1:(\d+)", log.read_text()) if log.exists() else []
-        if found:
-            return int(found[0])
+        port = served_port(out / "logs" / "foxglove_view.log")
+        if port is not None:
+            return port
         time.sleep(0.1)
     raise RuntimeError(f"foxglove_view named no port within {timeout_s:g} s")
 
