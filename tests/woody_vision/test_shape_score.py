@@ -502,3 +502,16 @@ def test_one_lost_frame_or_frames_lost_before_the_window_change_nothing():
     early = run_without(contours, {opens - 8, opens - 7, opens - 6})  # lost while flat, long before the window
     assert (early.status, early.reason, early.phi, early.line_phi) == (whole.status, "", whole.phi, whole.line_phi)
 
+
+
+def test_the_papers_phi_is_measured_on_the_image_outline_and_the_line_score_on_the_followed_one():
+    """The belt outline decides the window and line_phi; the outline in the image gives Φ and its terms."""
+    belt = translating(80, bend=foreshorten(0.5))
+    image = translating(80)  # a camera that happens to see no change: Φ of the image outline is 0
+    evaluator = ShapeEvaluator(EDGE)
+    result = next(r for i, (b, m) in enumerate(zip(belt, image)) if (r := evaluator.update(b, i / FPS, m)))
+    _, alone, _ = run_evaluator(belt)
+    assert result.status == "scored" and result.window_closed
+    assert result.line_phi == pytest.approx(alone.line_phi) and result.line_phi > 1.0
+    assert result.phi < 1e-6 and alone.phi > 1.0
+    assert len(result.paper_trace) == len(result.trace) and alone.paper_trace == alone.trace

@@ -273,7 +273,7 @@ class _TopView:
         blobs = segment_depth(noisy, self.background.depth, self.segmentation, color, self.background.color)
         update = self.tracker.update(blobs, now)
         observations = [TrackObservation(t.track_id, t.lane, belt_outline(t.blob.contour, noisy, self.k, self.height),
-                                         t.unseen) for t in update.active]
+                                         t.unseen, t.blob.contour) for t in update.active]
         for graded in self.grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
             self.results.setdefault(graded.lane, _shape_row(graded))
 

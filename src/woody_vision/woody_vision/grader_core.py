@@ -69,7 +69,10 @@ class TrackObservation:
     track_id: int
     lane: int
     contour: np.ndarray
+    """The outline the grade follows (on a line: the belt outline, woody_vision.camera_model.belt_outline)."""
     unseen: int = 0
+    image_contour: np.ndarray | None = None
+    """The outline in the image, for the paper's Φ (None: ``contour``)."""
 
 
 @dataclass(frozen=True)
@@ -205,7 +208,7 @@ class FilletGrader:
             evaluator = self._evaluators.get(track.track_id)
             if evaluator is None:
                 evaluator = self._evaluators[track.track_id] = ShapeEvaluator(self.edge_row, **self.evaluator_options)
-            result = evaluator.update(track.contour, stamp)
+            result = evaluator.update(track.contour, stamp, track.image_contour)
             if result is not None:  # a finished evaluator stays until its track ends: one verdict per track
                 decided += self._decide(track.track_id, result, _area(track.contour))
         for track_id in ended_ids:

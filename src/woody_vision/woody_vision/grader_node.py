@@ -221,7 +221,8 @@ class Grader(Node):
             bad = sorted(set(t.id for t in msg.tracks) - set(t.id for t in usable))
             self.side_checker.reject(f"tracks {bad}: contour_uv or belt_contour_uv not u, v pairs of at least 3 "
                                      "points; those skipped")
-        tracks = [TrackObservation(t.id, t.lane, _points(t.belt_contour_uv), t.unseen) for t in usable]
+        tracks = [TrackObservation(t.id, t.lane, _points(t.belt_contour_uv), t.unseen, _points(t.contour_uv))
+                  for t in usable]
         graded = self.core.on_tracks(stamp, tracks, msg.ended_ids)
         self._publish(graded)
         self._publish_side(self.core.release(stamp))

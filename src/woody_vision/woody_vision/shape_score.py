@@ -65,6 +65,13 @@ is rejected, never scored, and counted. If the frames left around the
 measuring point are too far apart, the fillet is unscored with the reason. The reference is likewise the latest
 flat outline not grown beyond ``MERGE_GROWTH`` × the median flat area.
 
+Two outlines. On a line the evaluator follows the fillet's outline on the belt plane
+(woody_vision.camera_model.belt_outline: what a camera off the fillet's axis sees of a
+part hanging over the roller, moved back to where it hangs), which decides the window and
+``line_phi``; the paper's Φ and its two terms are measured, as the paper measures them,
+on the outline in the image, against a reference made from the image outline of the same
+flat frame and clipped from its own trailing edge.
+
 A result is produced exactly once per evaluator: 'scored' when the window
 closes, otherwise 'unscored' with a reason (no reference because the track
 started at or past the edge, or the track ended before the window closed).
@@ -261,7 +268,9 @@ class ShapeResult:
     reference_stamp: float | None = None
     """Stamp of the reference frame (the last flat frame before the leading edge reached the roller edge)."""
     trace: tuple[FrameScore, ...] = ()
-    """Every scored frame of the window, in order."""
+    """Every scored frame of the window, in order (the outline the evaluator follows)."""
+    paper_trace: tuple[FrameScore, ...] = ()
+    """The same frames scored on the image outline (the paper's Φ_t; equal to ``trace`` without one)."""
     line_phi: float = math.nan
     """Φ_t at the overhang ``line_fraction`` × L, interpolated between the frames around it: the line's score."""
     line_fraction: float = LINE_OVERHANG_FRACTION
@@ -389,8 +398,10 @@ class ShapeEvaluator:
         self.reference_margin_px = float(reference_margin_px)
         self.line_fraction = float(line_fraction)
         self._phase = _Phase.APPROACHING
-        self._flat: list[tuple[np.ndarray, float, float]] = []
-        """(contour, stamp, area) of the latest flat frames."""
+        self._flat: list[tuple[np.ndarray, float, float, np.ndarray]] = []
+        """(contour, stamp, area, image outline) of the latest flat frames."""
+        self._image_reference: ShapeReference | None = None
+        self._paper_trace: list[FrameScore] = []
         self._reference: ShapeReference | None = None
         self._reference_contour: np.ndarray | None = None
         self._reference_stamp: float | None = None
@@ -438,43 +449,49 @@ class ShapeEvaluator:
         """True once the fillet was seen flat before the edge and its reference is locked."""
         return self._reference is not None
 
-    def update(self, contour: np.ndarray, stamp: float) -> ShapeResult | None:
-        """Feed this frame's full contour; returns the result on the frame it is decided."""
+    def update(self, contour: np.ndarray, stamp: float, image_contour: np.ndarray | None = None) -> ShapeResult | None:
+        """Feed this frame's full contour; returns the result on the frame it is decided.
+
+        ``contour`` decides the window and ``line_phi`` (the belt outline on a line); ``image_contour``, the
+        outline as the camera sees it (default: ``contour``), gives the paper's Φ, which the paper measures
+        on the image."""
         if self._phase is _Phase.DONE:
             return None
         self._step = stamp - self._last_stamp if self._last_stamp is not None else 0.0
         self._last_stamp = stamp
         self._sightings += 1
         points = np.asarray(contour, dtype=np.int32).reshape(-1, 2)
+        image = points if image_contour is None else np.asarray(image_contour, dtype=np.int32).reshape(-1, 2)
         if self._phase is _Phase.APPROACHING:
             if float(points[:, 1].max()) < self.edge_row - self.reference_margin_px:
-                self._remember_flat(points, stamp)
+                self._remember_flat(points, stamp, image)
                 return None
             if not self._flat:
                 return self._finish(STATUS_UNSCORED, REASON_STARTED_PAST_EDGE)
             if not self._lock_reference():
                 return self._finish(STATUS_UNSCORED, REASON_DEGENERATE)
             self._phase = _Phase.REFERENCED
-        return self._window_frame(points, stamp)
+        return self._window_frame(points, stamp, image)
 
-    def _remember_flat(self, points: np.ndarray, stamp: float) -> None:
-        self._flat = (self._flat + [(points, stamp, cv2.contourArea(points))])[-FLAT_HISTORY:]
+    def _remember_flat(self, points: np.ndarray, stamp: float, image: np.ndarray) -> None:
+        self._flat = (self._flat + [(points, stamp, cv2.contourArea(points), image)])[-FLAT_HISTORY:]
         self._last_trailing = int(points[:, 1].min())
         self._approach.append((stamp, float(points[:, 1].max())))
 
     def _lock_reference(self) -> bool:
         """The reference from the latest flat outline not grown by a merge; False if it is degenerate."""
-        typical = float(np.median([area for _, _, area in self._flat]))
+        typical = float(np.median([area for _, _, area, _ in self._flat]))
         clean = [f for f in self._flat if f[2] <= MERGE_GROWTH * typical]
-        points, self._reference_stamp, self._reference_area = (clean or self._flat)[-1]
+        points, self._reference_stamp, self._reference_area, image = (clean or self._flat)[-1]
         self._reference = make_reference(points, self.tip_ratio)
+        self._image_reference = self._reference if image is points else make_reference(image, self.tip_ratio)
         self._reference_contour = points
         self._reference_width = float(np.ptp(points[:, 0]) + 1)
         self._reference_column = _centroid_column(points)
         self._flat = []
-        return self._reference is not None
+        return self._reference is not None and self._image_reference is not None
 
-    def _window_frame(self, points: np.ndarray, stamp: float) -> ShapeResult | None:
+    def _window_frame(self, points: np.ndarray, stamp: float, image: np.ndarray) -> ShapeResult | None:
         reference = self._reference
         trailing = int(points[:, 1].min())
         if self._merged(points, trailing):
@@ -488,8 +505,10 @@ class ShapeEvaluator:
         if not self._closed:
             self._note_gap()
         overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
-        frame = self._score(clip_body(points, trailing, reference.length_px), stamp, overhang)
+        frame = self._score(self._reference, clip_body(points, trailing, reference.length_px), stamp, overhang)
         (self._extra if self._closed else self._trace).append(frame)
+        if not self._closed:
+            self._paper_trace.append(frame if image is points else self._score_image(image, stamp, overhang))
         self._contours.append(points)
         if not self._closed:
             overshoot = trailing + reference.centroid_offset_px - self.edge_row
@@ -551,9 +570,14 @@ class ShapeEvaluator:
         reason = REASON_LOST_IN_WINDOW if self._trace else REASON_LOST_BEFORE_EDGE
         return self._finish(STATUS_UNSCORED, reason)
 
-    def _score(self, body: np.ndarray, stamp: float, overhang: float) -> FrameScore:
+    def _score_image(self, image: np.ndarray, stamp: float, overhang: float) -> FrameScore:
+        """Φ_t of the image outline's body, clipped like the followed outline's from its own trailing edge."""
+        body = clip_body(image, int(image[:, 1].min()), self._image_reference.length_px)
+        return self._score(self._image_reference, body, stamp, overhang)
+
+    def _score(self, reference: ShapeReference, body: np.ndarray, stamp: float, overhang: float) -> FrameScore:
         if len(body) >= 3 and cv2.contourArea(body) > 0.0:
-            hu_term, solidity_term = shape_terms(self._reference, body)
+            hu_term, solidity_term = shape_terms(reference, body)
         else:  # a degenerate contour (no area) has no shape to compare: the frame counts, its terms are NaN
             hu_term, solidity_term = math.nan, math.nan
         return FrameScore(stamp, self.w1 * hu_term + self.w2 * solidity_term, hu_term, solidity_term, overhang)
@@ -563,7 +587,7 @@ class ShapeEvaluator:
         self._phase = _Phase.DONE
         referenced = self._reference is not None
         complete = self._closed and not self._window_gap
-        window = self._trace if complete else []
+        window = self._paper_trace if complete else []
         return ShapeResult(
             status=status,
             reason=reason,
@@ -575,6 +599,7 @@ class ShapeEvaluator:
             aspect_ratio=self._reference.aspect_ratio if referenced else math.nan,
             reference_stamp=self._reference_stamp if referenced else None,
             trace=tuple(self._trace),
+            paper_trace=tuple(self._paper_trace),
             line_phi=line_phi,
             line_fraction=self.line_fraction,
             leading_end=leading_end(self._reference_contour) if referenced else "",
