@@ -17,10 +17,10 @@ from woody_experiments.run_report import (
     calibrated_speeds,
     diversion_summary,
     gate_missed,
+    gate_timing_line,
     grade_confusion,
     join,
     read_csv,
-    report_threshold,
     uncalibrated_speed_note,
     verdict_table,
     write_csv,
@@ -43,10 +43,8 @@ def test_an_unscored_woody_fillet_lowers_the_line_accuracy_not_the_scored_one():
     assert accuracy_title(acc) == "line accuracy 66.7%, scored 100.0%"
 
 
-def test_the_report_states_both_accuracies_and_draws_the_graders_threshold(tmp_path):
+def test_the_report_states_both_accuracies_and_draws_each_fillets_cut(tmp_path):
     rows = rows_with_an_unscored_woody_fillet()
-    assert report_threshold(rows, None) == 11.02
-    assert report_threshold([], {"threshold": "9.5"}) == 9.5
     text = build_report(rows, tmp_path, notes=["skipped mesh x.stl: not a valid STL"]).read_text()
     assert "line accuracy (every fillet; one without a verdict is not diverted): **66.7%**" in text
     assert "accuracy: **100.0%**" in text and "- skipped mesh x.stl: not a valid STL" in text
@@ -130,8 +128,11 @@ def test_a_fillet_to_divert_without_a_gate_command_counts_as_not_diverted(tmp_pa
     verdicts = [Verdict(fillet_id=10 + i, lane=i, stamp=0.5, classification="woody", grade="severe", phi=3.0,
                         hu_term=0.1, solidity_term=0.01, nmdm=math.nan, mdm=math.nan, be=math.nan, threshold=8.0,
                         score=3.0) for i in range(3)]
-    rows = join(spawns, verdicts, gate_commands={(0, 10), (2, 12)})
+    rows = join(spawns, verdicts, gate_commands={(0, 10): 0.41, (2, 12): 0.38})
     assert [r["gate_command"] for r in rows] == ["sent", "none", "sent"]
+    assert rows[0]["gate_margin_s"] == 0.41 and math.isnan(rows[1]["gate_margin_s"])
+    assert gate_timing_line(rows) == "- the gate's timing margin (how long before its diverter had to open each " \
+        "command was sent): least 0.380 s, median 0.395 s over 2 commands"
     assert [gate_missed(r, True) for r in rows] == [False, True, False]
     acc = accuracy(rows, divert_unscored=True)
     assert (acc.woody_diverted, acc.correct) == (2, 3) and math.isclose(acc.line_accuracy, 2 / 3)

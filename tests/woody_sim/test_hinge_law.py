@@ -89,7 +89,7 @@ def test_chain_mass_matrix_gives_pybullets_joint_space_inertia_on_a_bent_chain()
         fillet = world._fillets[fid]
         model = fillet.model
         theta = world.hinge_angles(fid)
-        rows = p.calculateMassMatrix(fillet.body, theta.tolist(), physicsClientId=world._client)
+        rows = p.calculateMassMatrix(fillet.body, theta.tolist(), physicsClientId=fillet.physics.client)
         ours = chain_mass_matrix(fillet.state, model.masses, segment_inertias(model, config.inertia_floor),
                                  model.box_centers[1:] - model.joint_positions)
     expected = base_eliminated(np.array(rows))

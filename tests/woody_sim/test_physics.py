@@ -73,10 +73,10 @@ def test_segment_poses_and_hinge_angles_match_pybullet(fillet: FilletMesh) -> No
         assert poses.shape == (40, 7)
         assert np.linalg.norm(poses[:, 3:], axis=1) == pytest.approx(np.ones(40))
         body = world._fillets[fid].body
-        joints = p.getJointStates(body, list(range(39)), physicsClientId=world._client)
+        joints = p.getJointStates(body, list(range(39)), physicsClientId=world._fillets[fid].physics.client)
         assert world.hinge_angles(fid) == pytest.approx([j[0] for j in joints], abs=1e-9)
         assert world.hinge_angles(fid).sum() > 0.3  # the tip hangs down over the roller
-        base = p.getBasePositionAndOrientation(body, physicsClientId=world._client)
+        base = p.getBasePositionAndOrientation(body, physicsClientId=world._fillets[fid].physics.client)
         assert poses[0, :3] == pytest.approx(base[0]) and poses[0, 3:] == pytest.approx(base[1])
 
 
@@ -374,3 +374,39 @@ def test_chain_fate_tells_blow_ups_finished_chains_and_live_ones_apart():
     assert chain_fate(past, masses, -0.2) == FINISHED
     past[1, 0] = PAST_ROLLER_X + 0.05  # centre of mass short of it
     assert chain_fate(past, masses, -0.2) == KEEP
+
+
+def test_chains_are_built_in_fresh_pybullet_worlds_and_an_emptied_world_is_closed(monkeypatch) -> None:
+    """pybullet keeps every shape and some memory of every body a world ever built, so a world builds at most
+    CHAINS_PER_PHYSICS chains. With one per world, every chain is alone in its pybullet world and moves bit for
+    bit as in a line that only ever held it, however the chains overlap in time."""
+    from woody_sim import line_world
+    from woody_sim.meshes import load_mesh_set
+
+    meshes, _ = load_mesh_set("builtin")
+    geometry = LineGeometry(lanes=3, spawn_x=-0.15)
+    spawns = [(0, meshes[0], 0.0, 0), (40, meshes[1], 100.0, 1), (80, meshes[2], 0.0, 2), (300, meshes[0], 100.0, 0)]
+    sample_step = 320
+
+    def poses_of(chosen: list, chains_per_world: int) -> tuple[dict[int, np.ndarray], int]:
+        monkeypatch.setattr(line_world, "CHAINS_PER_PHYSICS", chains_per_world)
+        with LineWorld(geometry, calibrated_config()) as world:
+            ids, most = {}, 0
+            while world.steps < sample_step:
+                for step, mesh, k, lane in chosen:
+                    if world.steps == step:
+                        ids[step] = world.spawn(mesh, k, lane, MASS, SPEED)
+                world.step()
+                most = max(most, len(world._physics))
+            poses = {step: world.segment_poses()[fid] for step, fid in ids.items() if fid in world.fillets}
+            while world.fillets:
+                world.step()
+            assert len(world._physics) == 1  # the emptied worlds were closed
+        return poses, most
+
+    together, worlds = poses_of(spawns, 1)
+    assert worlds >= 3 and len(together) >= 2
+    for spawn in spawns:
+        if spawn[0] in together:
+            alone, _ = poses_of([spawn], 1000)
+            assert np.array_equal(together[spawn[0]], alone[spawn[0]])

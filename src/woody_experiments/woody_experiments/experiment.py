@@ -349,11 +349,12 @@ def _sensor_seed(spec: RunSpec) -> int:
 
 
 def _shape_row(graded) -> dict:
-    """The lane's top-down columns, plus under "trace" its window frame by frame (time relative to the close)."""
+    """The lane's top-down columns, plus under "trace" its window frame by frame as the paper's Φ_t (the image
+    outline; time relative to the window's close)."""
     shape = graded.shape
-    close = shape.stamp if shape.stamp is not None else math.nan
+    close = shape.paper_trace[-1].stamp if shape.paper_trace else math.nan
     trace = [{"t_rel_s": f.stamp - close, "phi": f.phi, "hu_term": f.hu_term, "solidity_term": f.solidity_term,
-              "overhang": f.overhang} for f in shape.trace + shape.extra_trace]
+              "overhang": f.overhang} for f in shape.paper_trace]
     paper = shape.window_closed
     return {"phi": float(shape.phi) if paper else math.nan, "hu_term": float(shape.hu_term) if paper else math.nan,
             "solidity_term": float(shape.solidity_term) if paper else math.nan, "line_phi": float(shape.line_phi),

@@ -42,6 +42,12 @@ def side_from_msg(msg) -> SideRecord:
                       reason=msg.reason)
 
 
+def gate_margin(msg) -> tuple[tuple[int, int], float]:
+    """A woody_msgs/GateCommand as (lane, fillet id) and its timing margin: how long before the diverter had to
+    open the command was issued (s, sim time; the gate sends no command it could not act on in time)."""
+    return (msg.lane, msg.fillet_id), stamp_to_seconds(msg.actuation_time) - stamp_to_seconds(msg.header.stamp)
+
+
 @dataclass
 class LineRecords:
     """What the line published about its fillets: ground truth, verdicts, side metrics and gate commands."""
@@ -49,8 +55,9 @@ class LineRecords:
     spawns: list[Spawn] = field(default_factory=list)
     verdicts: list[Verdict] = field(default_factory=list)
     sides: list[SideRecord] = field(default_factory=list)
-    gated: set[tuple[int, int]] | None = field(default_factory=set)
-    """(lane, fillet id) of every GateCommand; None when the gate's topic was not recorded."""
+    gated: dict[tuple[int, int], float] | None = field(default_factory=dict)
+    """(lane, fillet id) of every GateCommand and its timing margin (:func:`gate_margin`); None when the gate's topic
+    was not recorded."""
 
     def merged(self, other: LineRecords) -> LineRecords:
         """These records and ``other``'s, each message once: a verdict one record lost, the other may hold."""
@@ -58,7 +65,7 @@ class LineRecords:
             seen = {key(item) for item in mine}
             return mine + [item for item in theirs if key(item) not in seen]
 
-        gated = None if self.gated is None and other.gated is None else (self.gated or set()) | (other.gated or set())
+        gated = None if self.gated is None and other.gated is None else (other.gated or {}) | (self.gated or {})
         return LineRecords(union(self.spawns, other.spawns, lambda s: s.sim_id),
                            union(self.verdicts, other.verdicts, lambda v: (v.lane, v.fillet_id)),
                            union(self.sides, other.sides, lambda s: (s.lane, s.fillet_id)), gated)
@@ -75,7 +82,7 @@ def records_from_bag(path: Path) -> tuple[LineRecords, str | None]:
     suffixes = {"/" + topics.GROUND_TRUTH: (spawn_from_msg, records.spawns.append),
                 "/" + topics.VERDICTS: (verdict_from_msg, records.verdicts.append),
                 "/" + topics.SIDE_METRICS: (side_from_msg, records.sides.append),
-                "/" + topics.GATE_COMMANDS: (lambda m: (m.lane, m.fillet_id), records.gated.add)}
+                "/" + topics.GATE_COMMANDS: (gate_margin, lambda entry: records.gated.update([entry]))}
     wanted = [t for t in bag_topics(path) if t.endswith(tuple(suffixes))]
     try:
         for topic, type_name, data, _log_time in read_bag(path, topics=wanted):

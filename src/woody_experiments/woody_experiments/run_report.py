@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -20,16 +20,18 @@ VERDICT_COLUMNS = [
     "fillet_id", "lane", "mesh", "k", "speed_fpm", "phi", "hu_term", "solidity_term",
     "nmdm", "mdm", "be", "verdict", "grade", "truth", "sim_id", "mass", "spawn_time", "verdict_time", "reason",
     "threshold", "score", "line_phi", "measured_speed_mps", "leading_end", "rejected_frames", "true_grade",
-    "gate_command",
+    "gate_command", "gate_margin_s",
 ]
 """Columns of verdicts.csv: the paper's twelve first, then what an analyst needs to audit a row: the score the
 verdict used, the line score, the fillet's measured speed and leading end, the window frames rejected as merged
 with a neighbour, the grade its stiffness should get (woody_experiments.line_grade.true_grade), and whether
-reject_gate sent a command for it (GATE_SENT, GATE_NONE; empty when the gate's commands are not known)."""
+reject_gate sent a command for it (GATE_SENT, GATE_NONE; empty when the gate's commands are not known) and how
+long before the diverter had to open it was sent (s)."""
 GATE_SENT = "sent"
 GATE_NONE = "none"
 NUMERIC_COLUMNS = {"k", "speed_fpm", "phi", "hu_term", "solidity_term", "nmdm", "mdm", "be", "mass", "spawn_time",
-                   "verdict_time", "threshold", "score", "line_phi", "measured_speed_mps", "rejected_frames"}
+                   "verdict_time", "threshold", "score", "line_phi", "measured_speed_mps", "rejected_frames",
+                   "gate_margin_s"}
 UNSCORED_DIVERTED = "unscored fillets diverted"
 """Run setting (report.md's table, the bag's ``woody.run`` record): reject_gate's ``divert_unscored``."""
 
@@ -124,14 +126,15 @@ def truth_of(k: float, woody_k: float) -> str:
 
 
 def join(spawns: Sequence[Spawn], verdicts: Sequence[Verdict], woody_k: float = 50.0,
-         gate_commands: Collection[tuple[int, int]] | None = None, sides: Iterable[SideRecord] = ()) -> list[dict]:
+         gate_commands: Mapping[tuple[int, int], float] | None = None, sides: Iterable[SideRecord] = ()) -> list[dict]:
     """One row per spawned fillet (and per verdict nobody spawned), matched by lane and edge-crossing time.
 
     Per lane, the pairs minimise the total time difference (an assignment, not first come first served): on a
     crowded lane fillets cross the edge less than MATCH_TOLERANCE_S apart, and a fillet without a verdict must
     not take its neighbour's. Scored verdicts are matched first, the unscored ones to the fillets left.
-    ``gate_commands`` holds (lane, fillet id) of every GateCommand the run published: a verdict's row says
-    whether the gate acted on it (reject_gate sends none for a verdict that came too late to divert); ``sides``
+    ``gate_commands`` maps (lane, fillet id) of every GateCommand the run published to its timing margin (s): a
+    verdict's row says whether the gate acted on it (reject_gate sends none for a verdict that came too late to
+    divert) and with how much time to spare; ``sides``
     fills in the watched lane's side metrics (:func:`with_side`)."""
     verdicts = with_side(verdicts, sides)
     pairs: dict[int, int] = {}
@@ -148,7 +151,9 @@ def join(spawns: Sequence[Spawn], verdicts: Sequence[Verdict], woody_k: float = 
     if gate_commands is not None:
         for row in rows:
             if row["verdict"] != "missing":
-                row["gate_command"] = GATE_SENT if (row["lane"], row["fillet_id"]) in gate_commands else GATE_NONE
+                margin = gate_commands.get((row["lane"], row["fillet_id"]))
+                row["gate_command"] = GATE_NONE if margin is None else GATE_SENT
+                row["gate_margin_s"] = math.nan if margin is None else round(margin, 4)
     return rows
 
 
@@ -371,14 +376,6 @@ def accuracy_title(acc: Accuracy) -> str:
     return f"line accuracy {acc.line_accuracy:.1%}, scored {scored}"
 
 
-def report_threshold(rows: Sequence[dict], run_info: dict | None) -> float | None:
-    """The reject cut the grader used (from its verdicts; the lowest where it follows speed and leading end), else
-    the one in the run settings."""
-    used = sorted({r["threshold"] for r in rows if isinstance(r.get("threshold"), float)
-                   and not math.isnan(r["threshold"])})
-    return used[0] if used else _first_float(run_info, "threshold")
-
-
 TABLE_COLUMNS = [("fillet_id", 9), ("lane", 4), ("mesh", 14), ("k", 5), ("speed_fpm", 9),
                  ("measured_speed_mps", 8), ("leading_end", 6), ("score", 6), ("line_phi", 8), ("phi", 6),
                  ("grade", 8), ("verdict", 8), ("truth", 6)]
@@ -454,7 +451,7 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
     divert_unscored = unscored_diverted(run_info)
     acc = accuracy(rows, divert_unscored)
     scored = [r for r in rows if r["verdict"] in ("normal", "woody") and r.get("k") != ""]
-    _plot_phi(scored, report_threshold(rows, run_info), out_dir / "phi_by_k_lane.png")
+    _plot_phi(scored, out_dir / "phi_by_k_lane.png")
     side = [r for r in scored if isinstance(r.get("nmdm"), float) and not math.isnan(r["nmdm"])]
     _plot_nmdm(side, out_dir / "nmdm_by_k.png")
     _plot_confusion(acc, out_dir / "confusion.png")
@@ -485,7 +482,8 @@ def _line_sections(rows: Sequence[dict], acc: Accuracy) -> list[str]:
              f"- diverted {acc.woody_diverted} of {acc.woody} woody fillets (diverted: {rule}, and the gate sent "
              "its command in time)",
              *([f"- not diverted, {GATE_MISSED_REASON}: fillets {', '.join(late)}"] if late else []),
-             f"- correct verdicts (normal/woody as the truth): {acc.correct} of {acc.total} fillets", "",
+             f"- correct verdicts (normal/woody as the truth): {acc.correct} of {acc.total} fillets",
+             gate_timing_line(rows), "",
              "| condition | woody fillets | diverted | missed (verdict, score) |", "|---|---|---|---|"]
     lines += [f"| {key} | {n} | {n_out} | {', '.join(missed) or '–'} |"
               for key, n, n_out, missed in diversion_by_condition(rows, acc.divert_unscored)]
@@ -497,11 +495,24 @@ def _line_sections(rows: Sequence[dict], acc: Accuracy) -> list[str]:
     return lines + [""]
 
 
+def gate_timing_line(rows: Sequence[dict]) -> str:
+    """The report's line on the gate's timing margin over the commands it sent (``gate_margin_s``)."""
+    import numpy as np
+
+    margins = [r["gate_margin_s"] for r in rows if isinstance(r.get("gate_margin_s"), float)
+               and math.isfinite(r["gate_margin_s"])]
+    if not margins:
+        return "- the gate's timing margin: no gate command recorded"
+    return (f"- the gate's timing margin (how long before its diverter had to open each command was sent): least "
+            f"{min(margins):.3f} s, median {float(np.median(margins)):.3f} s over {len(margins)} commands")
+
+
 def _groups(rows: Sequence[dict]) -> tuple[list[float], list[int]]:
     return sorted({float(r["k"]) for r in rows}), sorted({int(r["lane"]) for r in rows})
 
 
-def _plot_phi(scored: Sequence[dict], threshold: float | None, path: Path) -> None:
+def _plot_phi(scored: Sequence[dict], path: Path) -> None:
+    """Each fillet's score (the one its verdict used) beside its own reject cut, per stiffness and lane."""
     import matplotlib.pyplot as plt
     import numpy as np
 
@@ -510,17 +521,19 @@ def _plot_phi(scored: Sequence[dict], threshold: float | None, path: Path) -> No
     width = 0.8 / max(len(lanes), 1)
     for j, lane in enumerate(lanes):
         for i, k in enumerate(ks):
-            values = [graded_score(r) for r in scored if float(r["k"]) == k and int(r["lane"]) == lane]
+            group = [r for r in scored if float(r["k"]) == k and int(r["lane"]) == lane]
+            values = [graded_score(r) for r in group]
             x = i + (j - (len(lanes) - 1) / 2) * width
             ax.scatter(np.full(len(values), x), values, s=14, color=f"C{j}", label=f"lane {lane}" if i == 0 else None)
+            cuts = [r["threshold"] for r in group if isinstance(r.get("threshold"), float)]
+            ax.scatter(np.full(len(cuts), x), cuts, s=40, marker="_", color="k",
+                       label="each fillet's reject cut (below: woody)" if i == j == 0 and cuts else None)
             if values:
                 ax.hlines(np.mean(values), x - width / 2, x + width / 2, color=f"C{j}")
-    if threshold is not None:
-        ax.axhline(threshold, color="k", ls="--", lw=0.8, label=f"reject cut {threshold:.3g} (below: woody)")
     ax.set_xticks(range(len(ks)), [f"k={k:g}" for k in ks])
     ax.set_ylabel("score the verdict used (line_phi, or Φ)")
     ax.set_title("score per stiffness and lane")
-    if lanes or threshold is not None:
+    if lanes:
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -604,17 +617,25 @@ def _markdown_body(rows: Sequence[dict], scored: Sequence[dict], side: Sequence[
         lines.append(f"| {k:g} | {len(group)} | {_mean_sd([r['nmdm'] for r in group], 3)} | "
                      f"{_mean_sd([r['mdm'] for r in group], 1)} | {_mean_sd([r['be'] for r in group], 1)} |")
     lines += ["", "![nmdm](nmdm_by_k.png)", "", "## Verdicts", "", "```",
-              verdict_table(rows, limit=200, divert_unscored=acc.divert_unscored), "```", ""]
+              verdict_table(rows, limit=200, divert_unscored=acc.divert_unscored), "```", "", *_pointer_lines()]
     return lines
 
 
-def _first_float(info: dict | None, key: str) -> float | None:
-    if not info or key not in info:
-        return None
-    try:
-        return float(info[key])
-    except (TypeError, ValueError):
-        return None
+DOCS = Path(__file__).resolve().parents[3] / "docs"
+"""woody's docs in the checkout the package runs from (absent in an installed copy without the repository)."""
+
+
+def _pointer_lines() -> list[str]:
+    """Where the report's terms and columns are defined, and how to watch the run in Foxglove."""
+    def doc(name: str) -> str:
+        path = DOCS / name
+        return f"[docs/{name}]({path.as_uri()})" if path.exists() else f"woody's docs/{name}"
+
+    return ["## Terms and the recording", "",
+            f"Every term above (Φ, line_phi, the cut, Hu and solidity terms, NMDM, MDM, BE, unscored) and every "
+            f"column of `verdicts.csv` with its unit: {doc('verdicts.md')}. To watch the run, open `line.mcap` in "
+            f"Foxglove (Open local file) and import the layout `docs/foxglove-layout.json`: {doc('foxglove.md')}.",
+            ""]
 
 
 def _mean_sd(values: Sequence[float], digits: int = 2) -> str:

@@ -146,6 +146,8 @@ class _Fillet:
     ride_start: float
     """Sim time at which the fillet was at ``origin``: its spawn, or the last belt speed change since."""
     body: int = -1
+    physics: _Physics | None = None
+    """The pybullet world the chain lives in (None while it rides the belt)."""
     activation_time: float = math.inf
     state: np.ndarray = field(default_factory=lambda: np.zeros((0, 13)))
     """(N, 13) per segment after the last step: position, quaternion (x, y, z, w), linear and angular velocity."""
@@ -161,6 +163,80 @@ class _Fillet:
     """(N, 3) principal inertias the chain was built with (:func:`segment_inertias`)."""
     joint_offsets: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     """(N - 1, 3) hinge i to the centre of segment i + 1, in that segment's frame."""
+
+
+CHAINS_PER_PHYSICS = 200
+"""Chains one pybullet world builds before later ones go to a fresh world (:class:`_Physics`)."""
+
+
+def _conveyor_contacts(physics: _Physics) -> np.ndarray:
+    """(K, 5) [body, segment, normal x, normal z, normal force (N)] of every chain's contact with the conveyor."""
+    # contact[7] points from the fillet to the conveyor; contact[9] is the normal force (N)
+    return np.array([(c[2], c[4] + 1, c[7][0], c[7][2], c[9])
+                     for c in p.getContactPoints(bodyA=physics.conveyor, physicsClientId=physics.client)
+                     if c[8] < CONTACT_DISTANCE]).reshape(-1, 5)
+
+
+class _Physics:
+    """One pybullet world (a DIRECT client): conveyor, floor and the chains built in it.
+
+    pybullet never frees a collision shape a body has used, and keeps some memory of every removed body, so a
+    world that builds chains for hours grows without end (each fillet of a messy line has its own shapes).
+    A :class:`LineWorld` therefore builds at most ``CHAINS_PER_PHYSICS`` chains in one world, then builds the
+    next ones in a fresh world and closes the old one when its last chain is gone: the memory stays flat. Chains
+    never touch one another, so a chain moves the same in whichever world it is.
+    """
+
+    def __init__(self, geometry: LineGeometry, config: PhysicsConfig) -> None:
+        self.client = p.connect(p.DIRECT)
+        self.built = 0
+        """Chains built in this world so far."""
+        self.live = 0
+        """Chains in this world now."""
+        self.shapes: dict[FilletMesh, list[int]] = {}
+        p.setGravity(0.0, 0.0, -9.81, physicsClientId=self.client)
+        p.setPhysicsEngineParameter(
+            fixedTimeStep=config.dt,
+            numSubSteps=0,
+            numSolverIterations=config.solver_iterations,
+            deterministicOverlappingPairs=1,
+            # Belt and roller are frictionless (the drive supplies the traction), so the implicit friction cone
+            # only adds solver work: without it the trajectories are bit-identical and stepSimulation ~5 % cheaper.
+            enableConeFriction=0,
+            physicsClientId=self.client,
+        )
+        self.conveyor = self._build_conveyor(geometry, config)
+
+    def _build_conveyor(self, g: LineGeometry, config: PhysicsConfig) -> int:
+        """Flat belt box (top z = 0, x from -belt_length to 0), end roller along y, catch floor."""
+        c = self.client
+        radius = g.roller_radius
+        shape = p.createCollisionShapeArray(
+            shapeTypes=[p.GEOM_BOX, p.GEOM_CYLINDER],
+            halfExtents=[[g.belt_length / 2.0, g.belt_width / 2.0, radius / 2.0], [0.0, 0.0, 0.0]],
+            radii=[0.0, radius],
+            lengths=[0.0, g.belt_width],
+            collisionFramePositions=[[-g.belt_length / 2.0, 0.0, -radius / 2.0], [0.0, 0.0, -radius]],
+            collisionFrameOrientations=[[0.0, 0.0, 0.0, 1.0], p.getQuaternionFromEuler([math.pi / 2.0, 0.0, 0.0])],
+            physicsClientId=c,
+        )
+        conveyor = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=shape, physicsClientId=c)
+        p.changeDynamics(conveyor, -1, lateralFriction=config.belt_friction, restitution=0.0, physicsClientId=c)
+        plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=c)
+        floor = p.createMultiBody(
+            baseMass=0.0, baseCollisionShapeIndex=plane, basePosition=[0.0, 0.0, g.floor_z], physicsClientId=c
+        )
+        p.changeDynamics(floor, -1, lateralFriction=0.8, restitution=0.0, physicsClientId=c)
+        return conveyor
+
+    @property
+    def full(self) -> bool:
+        return self.built >= CHAINS_PER_PHYSICS
+
+    def close(self) -> None:
+        if self.client >= 0:
+            p.disconnect(physicsClientId=self.client)
+            self.client = -1
 
 
 def seed_dynamic_friction(friction_static: float) -> float:
@@ -222,61 +298,23 @@ class LineWorld:
         self.config = config or PhysicsConfig()
         self.time = 0.0
         self._steps = 0
-        self._client = p.connect(p.DIRECT)
+        self._physics = [_Physics(self.geometry, self.config)]
+        """The pybullet worlds with chains in them, the one new chains are built in last."""
         self._fillets: dict[int, _Fillet] = {}
         self._removed: list[int] = []
         self.blown_up: list[int] = []
         """Ids of fillets removed because their chain blew up numerically (a known, rare edge instability)."""
         self._models: dict[FilletMesh, FilletModel] = {}
-        self._shapes: dict[FilletMesh, list[int]] = {}
         self._next_id = 0
         self._speed_changes: list[tuple[float, float]] = []
         """(sim time, belt speed m/s) to apply at the first step at or after that time, soonest first."""
         self._speed_history: list[tuple[float, float]] = []
         """(sim time, belt speed m/s) of the changes applied, for fillets spawned in the past (a worker world)."""
-        p.setGravity(0.0, 0.0, -9.81, physicsClientId=self._client)
-        p.setPhysicsEngineParameter(
-            fixedTimeStep=self.config.dt,
-            numSubSteps=0,
-            numSolverIterations=self.config.solver_iterations,
-            deterministicOverlappingPairs=1,
-            # Belt and roller are frictionless (the drive supplies the traction), so the implicit friction cone
-            # only adds solver work: without it the trajectories are bit-identical and stepSimulation ~5 % cheaper.
-            enableConeFriction=0,
-            physicsClientId=self._client,
-        )
-        self._conveyor = self._build_conveyor()
-
-    # ------------------------------------------------------------------ world
-
-    def _build_conveyor(self) -> int:
-        """Flat belt box (top z = 0, x from -belt_length to 0), end roller along y, catch floor."""
-        g = self.geometry
-        c = self._client
-        radius = g.roller_radius
-        shape = p.createCollisionShapeArray(
-            shapeTypes=[p.GEOM_BOX, p.GEOM_CYLINDER],
-            halfExtents=[[g.belt_length / 2.0, g.belt_width / 2.0, radius / 2.0], [0.0, 0.0, 0.0]],
-            radii=[0.0, radius],
-            lengths=[0.0, g.belt_width],
-            collisionFramePositions=[[-g.belt_length / 2.0, 0.0, -radius / 2.0], [0.0, 0.0, -radius]],
-            collisionFrameOrientations=[[0.0, 0.0, 0.0, 1.0], p.getQuaternionFromEuler([math.pi / 2.0, 0.0, 0.0])],
-            physicsClientId=c,
-        )
-        conveyor = p.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=shape, physicsClientId=c)
-        p.changeDynamics(conveyor, -1, lateralFriction=self.config.belt_friction, restitution=0.0, physicsClientId=c)
-        plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=c)
-        floor = p.createMultiBody(
-            baseMass=0.0, baseCollisionShapeIndex=plane, basePosition=[0.0, 0.0, g.floor_z], physicsClientId=c
-        )
-        p.changeDynamics(floor, -1, lateralFriction=0.8, restitution=0.0, physicsClientId=c)
-        return conveyor
 
     def close(self) -> None:
-        """Disconnect the physics client (the world is unusable afterwards)."""
-        if self._client >= 0:
-            p.disconnect(physicsClientId=self._client)
-            self._client = -1
+        """Disconnect the physics clients (the world is unusable afterwards)."""
+        for physics in self._physics:
+            physics.close()
 
     def __enter__(self) -> LineWorld:
         return self
@@ -295,9 +333,10 @@ class LineWorld:
 
     def release(self, mesh: FilletMesh) -> None:
         """Forget the chain model built for a mesh no later spawn uses (a placed fillet's own mesh); pybullet
-        keeps its collision shapes, as it cannot free a shape a body has used."""
+        keeps its collision shapes until the world they are in closes (:class:`_Physics`)."""
         self._models.pop(mesh, None)
-        self._shapes.pop(mesh, None)
+        for physics in self._physics:
+            physics.shapes.pop(mesh, None)
 
     def spawn(
         self, mesh: FilletMesh, k: float, lane: int, mass: float, speed_mps: float, fillet_id: int | None = None,
@@ -383,14 +422,14 @@ class LineWorld:
     def _leading_x(self, fillet: _Fillet) -> float:
         return float(fillet.state[-1, 0] + fillet.model.box_half_extents[-1, 0])
 
-    def _collision_shapes(self, mesh: FilletMesh, model: FilletModel) -> list[int]:
-        """Box shapes for a chain (cached per mesh: pybullet cannot free a shape a body has used).
+    def _collision_shapes(self, physics: _Physics, mesh: FilletMesh, model: FilletModel) -> list[int]:
+        """Box shapes for a chain in ``physics`` (cached per mesh: pybullet cannot free a shape a body has used).
 
         Segment 0 is the base (box at its origin); segment i hangs from hinge
         i - 1, so its box is offset from its link frame by centre - hinge.
         """
-        if mesh not in self._shapes:
-            c = self._client
+        if mesh not in physics.shapes:
+            c = physics.client
             half, centers, hinges = model.box_half_extents, model.box_centers, model.joint_positions
             shapes = [p.createCollisionShape(p.GEOM_BOX, halfExtents=half[0].tolist(), physicsClientId=c)]
             for i in range(1, model.n_segments):
@@ -400,8 +439,8 @@ class LineWorld:
                         p.GEOM_BOX, halfExtents=half[i].tolist(), collisionFramePosition=offset, physicsClientId=c
                     )
                 )
-            self._shapes[mesh] = shapes
-        return self._shapes[mesh]
+            physics.shapes[mesh] = shapes
+        return physics.shapes[mesh]
 
     def _activate(self, fillet: _Fillet) -> None:
         """Turn a kinematic fillet into a pybullet chain at its current pose, flat and at line speed.
@@ -410,11 +449,14 @@ class LineWorld:
         box centre, so pybullet's link (centre-of-mass) pose is the segment
         frame of :class:`FilletModel`.
         """
-        c = self._client
+        if self._physics[-1].full:
+            self._physics.append(_Physics(self.geometry, self.config))
+        physics = self._physics[-1]
+        c = physics.client
         model = fillet.model
         n = model.n_segments
         centers, hinges = model.box_centers, model.joint_positions
-        shapes = self._collision_shapes(fillet.mesh, model)
+        shapes = self._collision_shapes(physics, fillet.mesh, model)
         origin = fillet.state[0, :3] - centers[0]
         parents = [centers[0]] + [hinges[i - 2] for i in range(2, n)]
         identity = [0.0, 0.0, 0.0, 1.0]
@@ -451,7 +493,9 @@ class LineWorld:
             p.setCollisionFilterGroupMask(body, link, FILLET_COLLISION_GROUP, FILLET_COLLISION_MASK,
                                           physicsClientId=c)
         p.resetBaseVelocity(body, [fillet.speed, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=c)
-        fillet.body = body
+        fillet.body, fillet.physics = body, physics
+        physics.built += 1
+        physics.live += 1
         fillet.activation_time = self.time
         self._read_state(fillet)
 
@@ -459,7 +503,8 @@ class LineWorld:
         """Take a fillet off the line now (it is reported by :meth:`take_removed`)."""
         fillet = self._fillets.pop(fillet_id)
         if fillet.body >= 0:
-            p.removeBody(fillet.body, physicsClientId=self._client)
+            p.removeBody(fillet.body, physicsClientId=fillet.physics.client)
+            fillet.physics.live -= 1
         self._removed.append(fillet_id)
 
     @property
@@ -503,7 +548,9 @@ class LineWorld:
         self._update_drive(dynamic)
         for fillet in dynamic:
             self._apply(fillet)
-        p.stepSimulation(physicsClientId=self._client)
+        for physics in self._physics:
+            if physics.live:
+                p.stepSimulation(physicsClientId=physics.client)
         self._steps += 1
         self.time = self._steps * cfg.dt
         for fillet in self._fillets.values():
@@ -512,11 +559,19 @@ class LineWorld:
             else:
                 self._kinematic_state(fillet)
         self._remove_finished()
+        self._close_emptied()
         return self.time
+
+    def _close_emptied(self) -> None:
+        """Close every world but the newest once its last chain is gone (its memory goes with it)."""
+        for physics in self._physics[:-1]:
+            if not physics.live:
+                physics.close()
+        self._physics = [physics for physics in self._physics if physics.client >= 0]
 
     def _apply(self, fillet: _Fillet) -> None:
         """Hinge spring-damper and belt drive forces for the coming step."""
-        c = self._client
+        c = fillet.physics.client
         theta, rate = hinge_state(fillet.state)
         joints = list(range(fillet.model.n_segments - 1))
         torque = self._implicit_torque(fillet, theta, rate)
@@ -543,15 +598,11 @@ class LineWorld:
         being the segment's low-pass filtered contact normal force, so a segment
         the roller no longer presses on gets no drive.
         """
-        if not dynamic:
-            return
-        # contact[7] points from the fillet to the conveyor; contact[9] is the normal force (N)
-        rows = np.array([(c[2], c[4] + 1, c[7][0], c[7][2], c[9])
-                         for c in p.getContactPoints(bodyA=self._conveyor, physicsClientId=self._client)
-                         if c[8] < CONTACT_DISTANCE]).reshape(-1, 5)
         cfg = self.config
         blend = min(1.0, cfg.dt / cfg.normal_force_tau)
+        contacts = {id(physics): _conveyor_contacts(physics) for physics in self._physics if physics.live}
         for fillet in dynamic:
+            rows = contacts[id(fillet.physics)]
             mine = rows[rows[:, 0] == fillet.body]
             belt_drive(mine[:, 1].astype(np.int64), mine[:, 2:], fillet.state[:, 7:10], fillet.model.masses,
                        fillet.speed, cfg.dt, blend, cfg.friction_static, cfg.friction_dynamic,
@@ -559,7 +610,7 @@ class LineWorld:
 
     def _read_state(self, fillet: _Fillet) -> None:
         """One batched query for every link's pose and velocity (segment frames = centre-of-mass frames)."""
-        c = self._client
+        c = fillet.physics.client
         pos, orn = p.getBasePositionAndOrientation(fillet.body, physicsClientId=c)
         lin, ang = p.getBaseVelocity(fillet.body, physicsClientId=c)
         links = p.getLinkStates(

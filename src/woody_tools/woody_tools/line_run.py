@@ -28,7 +28,14 @@ from woody_common.dds_shm import remove_stale
 from woody_common.line import fpm_to_mps, spacing_at_rate, watched_lane
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.fillet_pictures import write_fillet_pictures
-from woody_experiments.messages import LineRecords, records_from_bag, side_from_msg, spawn_from_msg, verdict_from_msg
+from woody_experiments.messages import (
+    LineRecords,
+    gate_margin,
+    records_from_bag,
+    side_from_msg,
+    spawn_from_msg,
+    verdict_from_msg,
+)
 from woody_experiments.run_report import (
     CALIBRATED_SPEEDS,
     MATCH_TOLERANCE_S,
@@ -153,7 +160,7 @@ class LineMonitor:
         self.spawns: list[Spawn] = []
         self.verdicts: list[Verdict] = []
         self.sides: list[SideRecord] = []
-        self.gate_commands: set[tuple[int, int]] = set()
+        self.gate_commands: dict[tuple[int, int], float] = {}
         """(lane, fillet id) of every GateCommand: the fillets the gate acted on in time."""
         self.sim_time = 0.0
         self.first_frame: tuple[float, float] | None = None
@@ -193,7 +200,7 @@ class LineMonitor:
         self.sides.append(side_from_msg(msg))
 
     def _on_gate(self, msg) -> None:
-        self.gate_commands.add((msg.lane, msg.fillet_id))
+        self.gate_commands.update([gate_margin(msg)])
 
     def _on_frame(self, msg) -> None:
         self.sim_time = stamp_to_seconds(msg.header.stamp)
