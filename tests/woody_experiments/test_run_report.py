@@ -48,6 +48,7 @@ def test_the_report_states_both_accuracies_and_draws_each_fillets_cut(tmp_path):
     text = build_report(rows, tmp_path, notes=["skipped mesh x.stl: not a valid STL"]).read_text()
     assert "line accuracy (every fillet; one without a verdict is not diverted): **66.7%**" in text
     assert "accuracy: **100.0%**" in text and "- skipped mesh x.stl: not a valid STL" in text
+    assert "## Terms and the recording" in text and "verdicts.md)" in text and "file://" not in text
 
 
 def rows_of_a_messy_line() -> list[dict]:

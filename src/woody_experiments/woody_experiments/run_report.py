@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -460,7 +461,7 @@ def build_report(rows: Sequence[dict], out_dir: Path, *, title: str = "woody lin
         lines += ["| setting | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in run_info.items()] + [""]
     notes = list(notes) + speed_notes_of(rows, run_info)
     lines += [f"- {note}" for note in notes] + ([""] if notes else [])
-    lines += _markdown_body(rows, scored, side, acc) + list(extra)
+    lines += _markdown_body(rows, scored, side, acc) + _pointer_lines(out_dir) + list(extra)
     path = out_dir / "report.md"
     path.write_text("\n".join(lines))
     return path
@@ -504,7 +505,8 @@ def gate_timing_line(rows: Sequence[dict]) -> str:
     if not margins:
         return "- the gate's timing margin: no gate command recorded"
     return (f"- the gate's timing margin (how long before its diverter had to open each command was sent): least "
-            f"{min(margins):.3f} s, median {float(np.median(margins)):.3f} s over {len(margins)} commands")
+            f"{min(margins):.3f} s, median {float(np.median(margins)):.3f} s over {len(margins)} command"
+            + ("s" if len(margins) > 1 else ""))
 
 
 def _groups(rows: Sequence[dict]) -> tuple[list[float], list[int]]:
@@ -617,7 +619,7 @@ def _markdown_body(rows: Sequence[dict], scored: Sequence[dict], side: Sequence[
         lines.append(f"| {k:g} | {len(group)} | {_mean_sd([r['nmdm'] for r in group], 3)} | "
                      f"{_mean_sd([r['mdm'] for r in group], 1)} | {_mean_sd([r['be'] for r in group], 1)} |")
     lines += ["", "![nmdm](nmdm_by_k.png)", "", "## Verdicts", "", "```",
-              verdict_table(rows, limit=200, divert_unscored=acc.divert_unscored), "```", "", *_pointer_lines()]
+              verdict_table(rows, limit=200, divert_unscored=acc.divert_unscored), "```", ""]
     return lines
 
 
@@ -625,11 +627,12 @@ DOCS = Path(__file__).resolve().parents[3] / "docs"
 """woody's docs in the checkout the package runs from (absent in an installed copy without the repository)."""
 
 
-def _pointer_lines() -> list[str]:
-    """Where the report's terms and columns are defined, and how to watch the run in Foxglove."""
+def _pointer_lines(out_dir: Path) -> list[str]:
+    """Where the report's terms and columns are defined, and how to watch the run in Foxglove (links relative to
+    the report, so a report kept in the repository links the same on every machine)."""
     def doc(name: str) -> str:
         path = DOCS / name
-        return f"[docs/{name}]({path.as_uri()})" if path.exists() else f"woody's docs/{name}"
+        return f"[docs/{name}]({os.path.relpath(path, out_dir.resolve())})" if path.exists() else f"woody's docs/{name}"
 
     return ["## Terms and the recording", "",
             f"Every term above (Φ, line_phi, the cut, Hu and solidity terms, NMDM, MDM, BE, unscored) and every "
