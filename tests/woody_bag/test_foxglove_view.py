@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import csv
 import subprocess
+import time
 
 import pytest
 
 from woody_bag.foxglove_client import Watcher, served_port
 from woody_bag.schemas import decode
 from woody_bag.summary import bag_summary
+from woody_common.calibration import resolved_calibration
 from woody_tools.processes import entry_point, wait_for
 
 pytestmark = pytest.mark.ros
@@ -22,6 +24,26 @@ pytestmark = pytest.mark.ros
 WATCHED = {"/top_camera/color/image_raw": "sensor_msgs/msg/Image",
            "/grading/annotations": "foxglove_msgs/msg/ImageAnnotations",
            "/grading/verdicts": "woody_msgs/msg/FilletVerdict", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+
+
+THRESHOLD = "/grader.threshold"
+
+
+def read_only_parameters(client: Watcher, run: subprocess.Popen) -> tuple[float, float]:
+    """The grader's threshold as a client reads it, and as it reads it after setting it to 1.0 (minus the
+    first reading: 0.0 when neither moved); polls while the line runs."""
+    read = changed = None
+    while run.poll() is None and changed is None:
+        if read is None:
+            client.send({"op": "getParameters", "parameterNames": [], "id": "get"})
+            read = client.parameter_values.get("get", {}).get(THRESHOLD)
+            if read is not None:
+                client.send({"op": "setParameters", "id": "set", "parameters": [{"name": THRESHOLD, "value": 1.0}]})
+        else:
+            changed = client.parameter_values.get("set", {}).get(THRESHOLD)
+        time.sleep(0.25)
+    assert read is not None and changed is not None, "no parameters while the line ran"
+    return read - resolved_calibration().phi_threshold, changed - read
 
 
 def test_a_foxglove_client_watches_the_live_line(tmp_path):
@@ -33,6 +55,7 @@ def test_a_foxglove_client_watches_the_live_line(tmp_path):
     try:
         assert wait_for(lambda: served_port(log) is not None, timeout=120), log.exists() and log.read_text()
         client = Watcher(f"ws://127.0.0.1:{served_port(log)}", set(WATCHED))
+        parameters = read_only_parameters(client, run)
         stdout, stderr = run.communicate(timeout=600)
     finally:
         run.kill()
@@ -48,6 +71,7 @@ def test_a_foxglove_client_watches_the_live_line(tmp_path):
     assert received["/top_camera/color/image_raw"], "no colour frame"
     labelled = [decode(WATCHED["/grading/annotations"], data) for data in received["/grading/annotations"]]
     assert any(msg.texts and len(msg.texts) == len(msg.points) for msg in labelled)
+    assert parameters == (0.0, 0.0)  # the grader's parameter as it is, after a client tried to set it
     health = [decode(WATCHED["/diagnostics"], data) for data in received["/diagnostics"]]
     assert {status.name.rsplit("/", 1)[-1] for msg in health for status in msg.status} >= {
         "line_sim", "segmenter", "grader", "reject_gate", "recorder"}

@@ -39,19 +39,33 @@ class Watcher:
     """Watches ``topics`` on a Foxglove WebSocket server in a thread until the server closes the connection.
 
     ``advertised`` maps every advertised topic to its schema name; ``received`` maps each watched topic to
-    its messages' payloads (CDR for a ROS 2 server), in arrival order.
+    its messages' payloads (CDR for a ROS 2 server), in arrival order; ``parameter_values`` maps the id of
+    each parameter request sent with :meth:`send` to the parameters (name -> value) of the server's answer.
     """
 
     def __init__(self, url: str, topics: set[str]) -> None:
         self.url, self.topics = url, set(topics)
         self.advertised: dict[str, str] = {}
         self.received: dict[str, list[bytes]] = defaultdict(list)
+        self.parameter_values: dict[str, dict[str, object]] = {}
         self.error: BaseException | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._connection = None
         self._thread = threading.Thread(target=self._run, name="foxglove-client", daemon=True)
         self._thread.start()
 
     def join(self, timeout: float) -> None:
         self._thread.join(timeout)
+
+    def send(self, message: dict) -> bool:
+        """Send a JSON message (e.g. ``getParameters``) from any thread; False while not connected."""
+        if self._loop is None or self._connection is None:
+            return False
+        try:
+            self._loop.call_soon_threadsafe(self._connection.write_message, json.dumps(message))
+        except RuntimeError:  # the connection closed and its loop with it
+            return False
+        return True
 
     def _run(self) -> None:
         try:
@@ -63,6 +77,7 @@ class Watcher:
         from tornado.websocket import websocket_connect
 
         connection = await websocket_connect(self.url, subprotocols=SUBPROTOCOLS)
+        self._loop, self._connection = asyncio.get_running_loop(), connection
         subscriptions: dict[int, tuple[int, str]] = {}
         while (frame := await connection.read_message()) is not None:
             if isinstance(frame, str):
@@ -78,6 +93,8 @@ class Watcher:
                 if channel_id == int(unknown.group(1)):
                     await asyncio.sleep(RETRY_S)
                     await _subscribe(connection, subscription, channel_id)
+        if message.get("op") == "parameterValues":
+            self.parameter_values[message.get("id")] = {p["name"]: p.get("value") for p in message["parameters"]}
         if message.get("op") != "advertise":
             return
         for channel in message["channels"]:

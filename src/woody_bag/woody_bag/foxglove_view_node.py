@@ -13,8 +13,9 @@ Every topic whose type is importable is offered as a channel with its ROS 2 sche
 rosbag2 stores it) and CDR messages, as foxglove_bridge offers it, under the names the graph uses. A
 topic is subscribed on the ROS side only while a client watches it, so an open view with nothing
 watched costs the line only discovery. The line's ``/clock`` is the server's time (Foxglove's clock
-runs at the line's pace). Nothing a client sends reaches the line: no client publishing, no
-parameters, no services.
+runs at the line's pace). Every node's parameters are offered read-only (``<node>.<parameter>``, read
+every ``PARAMETER_PERIOD_S``; a set request is answered with the values unchanged). Nothing a client
+sends reaches the line: no client publishing, no parameter changes, no services.
 """
 
 from __future__ import annotations
@@ -25,10 +26,11 @@ import sys
 import time
 
 import foxglove
-from foxglove.websocket import Capability, ServerListener
+from foxglove.websocket import Capability, Parameter, ServerListener
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
+from woody_bag.graph_parameters import GraphParameters
 from woody_bag.qos import subscription_qos
 from woody_bag.recorder_node import CLOCK_TYPE, DEFAULT_EXCLUDE, clock_stamp
 from woody_bag.schemas import message_class, message_definition
@@ -39,13 +41,26 @@ QUEUE_DEPTH = 10
 """Keep-last depth of a watched topic: a view shows the newest, it never catches up on a backlog."""
 TIME_PERIOD_S = 0.1
 """Wall seconds between two broadcasts of the line's time."""
+PARAMETER_PERIOD_S = 5.0
+"""Wall seconds between two readings of the graph's parameters (they are set at start-up and rarely change)."""
 
 
 class _Watching(ServerListener):
-    """Hands the clients' subscribe and unsubscribe requests to the node's thread (rclpy is not thread-safe)."""
+    """Hands the clients' subscribe and unsubscribe requests to the node's thread (rclpy is not thread-safe) and
+    answers parameter requests from the values the node's thread last read."""
 
-    def __init__(self) -> None:
+    def __init__(self, parameters: GraphParameters) -> None:
         self.requests: queue.SimpleQueue = queue.SimpleQueue()
+        self.parameters = parameters
+
+    def on_get_parameters(self, client, param_names: list[str], request_id: str | None = None) -> list[Parameter]:
+        values = self.parameters.values
+        return [Parameter(name, value=value) for name, value in values.items()
+                if value is not None and (not param_names or name in param_names)]
+
+    def on_set_parameters(self, client, parameters: list[Parameter], request_id: str | None = None) -> list[Parameter]:
+        """Read-only: the requested parameters with their values unchanged."""
+        return self.on_get_parameters(client, [parameter.name for parameter in parameters], request_id)
 
     def on_subscribe(self, client, channel) -> None:
         self.requests.put((channel.topic, +1))
@@ -66,8 +81,10 @@ class FoxgloveView(Node):
         period = declare(self, "discovery_period", 1.0, "seconds between searches for new topics", 0.05, 60.0)
         self.exclude = re.compile(declare(self, "exclude_regex", DEFAULT_EXCLUDE, "never offer matching topics"))
         check_overrides(self)
-        self.watching = _Watching()
-        self.server = foxglove.start_server(name="woody", host=host, port=port, capabilities=[Capability.Time],
+        self.parameters = GraphParameters(self)
+        self.watching = _Watching(self.parameters)
+        self.server = foxglove.start_server(name="woody", host=host, port=port,
+                                            capabilities=[Capability.Time, Capability.Parameters],
                                             server_listener=self.watching)
         self.channels: dict[str, tuple[foxglove.Channel, str]] = {}
         self.watchers: dict[str, int] = {}
@@ -76,6 +93,7 @@ class FoxgloveView(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(period, self.discover, clock=steady)
         self.create_timer(0.02, self.follow_clients, clock=steady)
+        self.create_timer(PARAMETER_PERIOD_S, self.parameters.refresh, clock=steady)
         self.discover()
         self.get_logger().info(f"Foxglove view on ws://{host}:{self.server.port} (images at most "
                                f"{1.0 / self.image_period:g} Hz per topic)")
@@ -94,6 +112,8 @@ class FoxgloveView(Node):
             self.channels[topic] = (foxglove.Channel(topic, schema=schema, message_encoding="cdr"), types[0])
         for topic in [t for t in self.channels if self._wanted(t) and t not in self.forwarding]:
             self._subscribe(topic)
+        if not self.parameters.values:  # until the first values come, read them every discovery
+            self.parameters.refresh()
 
     def _wanted(self, topic: str) -> bool:
         """A topic is forwarded while a client watches it; the clock always (it is the server's time)."""
