@@ -80,13 +80,6 @@ from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
 from woody_sim.split_world import MAX_PHYSICS_WORKERS, SplitLineWorld
 
-WORLD_FRAME = "world"
-"""REP 103: x downstream along the flow, z up, the origin on the belt surface at the roller edge, mid-belt."""
-ROLLER_FRAME = "roller"
-"""The end roller's axle (x along the flow, as the world frame)."""
-TOP_FRAME = "top_camera_optical_frame"
-SIDE_FRAME = "side_camera_optical_frame"
-"""Optical frames (REP 103): z along the optical axis, x right and y down in the image."""
 SENSOR_STREAM = 11
 """Second seed word of the camera error model's random stream (the first is the node's ``seed``)."""
 HELD_WARN_S = 1.0
@@ -294,12 +287,12 @@ class LineSim(Node):
         self.depth_info_pub = self.create_publisher(CameraInfo, topics.TOP_DEPTH_INFO, camera_qos)
         self.side_pub = self.create_publisher(Image, topics.SIDE_IMAGE, camera_qos)
         self.side_info_pub = self.create_publisher(CameraInfo, "side_camera/camera_info", camera_qos)
-        self.top_info = _camera_info(self.geometry.top_camera(), TOP_FRAME)
-        self.side_info = _camera_info(self.geometry.side_camera(), SIDE_FRAME)
+        self.top_info = _camera_info(self.geometry.top_camera(), topics.TOP_FRAME)
+        self.side_info = _camera_info(self.geometry.side_camera(), topics.SIDE_FRAME)
         self.create_service(SpawnFillet, "spawn_fillet", self.on_spawn_request)
         tf_static = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.tf_static_pub = self.create_publisher(TFMessage, "tf_static", tf_static)
+        self.tf_static_pub = self.create_publisher(TFMessage, topics.TF_STATIC, tf_static)
         self._line_publishers = [self.clock_pub, self.truth_pub, self.color_pub, self.depth_pub, self.color_info_pub,
                                  self.depth_info_pub, self.side_pub, self.side_info_pub, self.tf_static_pub]
         self.tf_static_pub.publish(static_transforms(self.geometry))
@@ -351,7 +344,7 @@ class LineSim(Node):
                           damping=float(self.world.config.damping), mass=float(mass), line_speed=float(speed),
                           segments=model.n_segments, length=float(placed.length), width=float(placed.width),
                           thickness=float(placed.thickness))
-        msg.header = self._header(WORLD_FRAME)
+        msg.header = self._header(topics.WORLD_FRAME)
         msg.position.x = float(self.geometry.spawn_x)
         msg.position.y = float(self.geometry.lane_y(lane) + placement.lateral_offset_m)
         self.truth_pub.publish(msg)
@@ -405,7 +398,7 @@ class LineSim(Node):
 
     def _publish_frames(self, frames, stamp: float) -> None:
         if frames.top_rgb is not None and not self.sensor.drop(self.sensor_rng):
-            header = self._header(TOP_FRAME, stamp)
+            header = self._header(topics.TOP_FRAME, stamp)
             depth = to_message_array(self.sensor.depth(frames.top_depth, self.sensor_rng), self.sensor.encoding)
             self.color_pub.publish(image_message(self.sensor.color(frames.top_rgb, self.sensor_rng), "rgb8", header))
             self.depth_pub.publish(image_message(depth, self.sensor.encoding, header))
@@ -413,7 +406,7 @@ class LineSim(Node):
             self.color_info_pub.publish(self.top_info)
             self.depth_info_pub.publish(self.top_info)
         if frames.side_rgb is not None:
-            header = self._header(SIDE_FRAME, stamp)
+            header = self._header(topics.SIDE_FRAME, stamp)
             self.side_pub.publish(image_message(frames.side_rgb, "rgb8", header))
             self.side_info.header = header
             self.side_info_pub.publish(self.side_info)
@@ -560,7 +553,7 @@ def _check_rate(rate: float, speed_fpm: float) -> None:
 def _transform(child: str, position, rotation) -> TransformStamped:
     """``child`` in the world frame: its origin at ``position`` (m), its axes the columns of ``rotation``."""
     transform = TransformStamped()
-    transform.header.frame_id, transform.child_frame_id = WORLD_FRAME, child
+    transform.header.frame_id, transform.child_frame_id = topics.WORLD_FRAME, child
     t = transform.transform.translation
     t.x, t.y, t.z = (float(c) for c in position)
     q = transform.transform.rotation
@@ -571,8 +564,8 @@ def _transform(child: str, position, rotation) -> TransformStamped:
 def static_transforms(geometry: LineGeometry) -> TFMessage:
     """The line's fixed frames for /tf_static: the roller axle and both cameras' optical frames in the world."""
     axle_x, axle_z = geometry.roller_axle
-    transforms = [_transform(ROLLER_FRAME, (axle_x, 0.0, axle_z), np.eye(3))]
-    for frame, camera in ((TOP_FRAME, geometry.top_camera()), (SIDE_FRAME, geometry.side_camera())):
+    transforms = [_transform(topics.ROLLER_FRAME, (axle_x, 0.0, axle_z), np.eye(3))]
+    for frame, camera in ((topics.TOP_FRAME, geometry.top_camera()), (topics.SIDE_FRAME, geometry.side_camera())):
         transforms.append(_transform(frame, camera.position, camera.rotation))
     return TFMessage(transforms=transforms)
 

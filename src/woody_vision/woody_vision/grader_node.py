@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from collections import deque
 
 import cv2
@@ -66,6 +67,7 @@ from woody_vision.grader_core import (
 from woody_vision.grading import THRESHOLD_RANGE, Cut, FilletConditions, FittedRange, GradingRules
 from woody_vision.image_encodings import color_rgb
 from woody_vision.image_qos import declare_image_qos
+from woody_vision.mount_watch import MountWatch
 from woody_vision.overlays import FRAME, Overlay, outline, verdict_overlays
 from woody_vision.shape_score import LINE_OVERHANG_FRACTION, TIP_WIDTH_RATIO, W1, W2
 from woody_vision.side_view import SidePassageTracker
@@ -100,6 +102,8 @@ class Grader(Node):
             line_fraction=declare(self, "line_fraction", LINE_OVERHANG_FRACTION, "line_phi is Φ_t where the rigid "
                                   "overhang is this fraction of the body length.", 0.1, 0.9),
         )
+        self.mount_watch = MountWatch(self)
+        self.first_info_at = 0.0
         self.side = self._declare_side_view()
         self.core: FilletGrader | None = None
         self.early_tracks: deque = deque(maxlen=EARLY_TRACKS)
@@ -194,12 +198,18 @@ class Grader(Node):
 
     def on_camera_info(self, info: CameraInfo) -> None:
         if self.core is None and info.k[0] > 0:
-            row = edge_row(tuple(info.k), self.camera_height, self.edge_offset)
+            now = time.monotonic()
+            self.first_info_at = self.first_info_at or now
+            if self.mount_watch.mount(info.header.frame_id) is None and self.mount_watch.waiting(self.first_info_at,
+                                                                                                 now):
+                return  # tracks wait in early_tracks
+            height, offset, source = self.mount_watch.geometry(info.header.frame_id, self.camera_height,
+                                                               self.edge_offset)
+            row = edge_row(tuple(info.k), height, offset)
             self.core = FilletGrader(row, self.rules, self.watched_lane if self.side else None, self.side_wait,
-                                     self.evaluator_options, info.k[4] / self.camera_height, self.score,
-                                     self.fitted_range)
-            self.get_logger().info(f"roller edge at image row {row:.1f} (from camera_info K, camera height "
-                                   f"{self.camera_height} m, edge offset {self.edge_offset} m)")
+                                     self.evaluator_options, info.k[4] / height, self.score, self.fitted_range)
+            self.get_logger().info(f"roller edge at image row {row:.1f} (camera_info K; camera height {height:.3f} m "
+                                   f"and edge offset {offset:.3f} m from {source})")
             early, self.early_tracks = self.early_tracks, deque()
             for msg in early:  # tracks that arrived before camera_info (discovery order) are graded, not lost
                 self.on_tracks(msg)

@@ -48,6 +48,7 @@ from woody_vision.frame_checks import FrameChecker, FrameError, SimTimeWatch, wa
 from woody_vision.frame_pairing import FramePairing, Pair
 from woody_vision.image_encodings import color_rgb, depth_metres, match_size
 from woody_vision.image_qos import declare_image_qos
+from woody_vision.mount_watch import MountWatch
 from woody_vision.segmentation import DEFAULT_HEIGHT_THRESHOLD_M, BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.tracking import CentroidTracker
 
@@ -94,6 +95,8 @@ class Segmenter(Node):
         self.background = BackgroundModel(frames)
         self.tracker_options = dict(max_distance_px=max_distance, max_unseen=max_unseen)
         self.tracker: CentroidTracker | None = None
+        self.mount_watch = MountWatch(self)
+        self.mount_from_tf = False
         self.checker = FrameChecker(self.get_logger())
         self.sim_time = SimTimeWatch()
         self.clock_jumps = watch_clock(self, self.sim_time, self.restart)
@@ -135,13 +138,22 @@ class Segmenter(Node):
         return Health(WARN if skipped else OK, f"{self.frames} depth frames, {skipped} skipped", values)
 
     def on_camera_info(self, info: CameraInfo) -> None:
-        if self.tracker is None and info.k[0] > 0:
-            layout = LaneLayout(tuple(info.k), self.camera_height, self.lanes, self.lane_pitch)
-            self.params = dataclasses.replace(
-                self.params, split_width_px=self.max_fillet_width * info.k[0] / self.camera_height)
+        if info.k[0] <= 0 or (self.tracker is not None and self.mount_from_tf):
+            return
+        mount = self.mount_watch.mount(info.header.frame_id)
+        if self.tracker is not None and mount is None:
+            return
+        height, _, source = self.mount_watch.geometry(info.header.frame_id, self.camera_height, 0.0)
+        self.mount_from_tf = mount is not None
+        layout = LaneLayout(tuple(info.k), height, self.lanes, self.lane_pitch)
+        self.params = dataclasses.replace(self.params, split_width_px=self.max_fillet_width * info.k[0] / height)
+        if self.tracker is None:
             self.tracker = CentroidTracker(lane_layout=layout, **self.tracker_options)
-            self.info_size = (info.width, info.height)
-            self.get_logger().info(f"calibration received: fx={info.k[0]:.1f}, {info.width}x{info.height}")
+        else:  # tf_static came after the first camera_info: its mount from now on
+            self.tracker.lane_layout = layout
+        self.info_size = (info.width, info.height)
+        self.get_logger().info(f"calibration received: fx={info.k[0]:.1f}, {info.width}x{info.height}; camera "
+                               f"height {height:.3f} m from {source}")
 
     def on_reset(self, _msg: Empty) -> None:
         self.background.reset()
