@@ -183,8 +183,8 @@ class _Physics:
     pybullet never frees a collision shape a body has used, and keeps some memory of every removed body, so a
     world that builds chains for hours grows without end (each fillet of a messy line has its own shapes).
     A :class:`LineWorld` therefore builds at most ``CHAINS_PER_PHYSICS`` chains in one world, then builds the
-    next ones in a fresh world and closes the old one when its last chain is gone: the memory stays flat. Chains
-    never touch one another, so a chain moves the same in whichever world it is.
+    next ones in a fresh world and closes the old one when its last chain is gone, which frees what pybullet
+    held of them. Chains never touch one another, so a chain moves the same in whichever world it is.
     """
 
     def __init__(self, geometry: LineGeometry, config: PhysicsConfig) -> None:
