@@ -19,7 +19,10 @@ API (import with ``from bad_input.conftest import ...``; the ``entry`` fixture b
 
 from __future__ import annotations
 
+import atexit
+import functools
 import os
+import shutil
 import signal
 import subprocess
 import tempfile
@@ -48,10 +51,18 @@ class Outcome:
         return [line for line in text.splitlines() if line.strip() and not line.startswith(BANNER)]
 
 
+@functools.cache
+def _scratch() -> Path:
+    """One folder for the working directories of every entry point run here, removed when the tests end."""
+    path = Path(tempfile.mkdtemp(prefix="bad_input_"))
+    atexit.register(shutil.rmtree, path, ignore_errors=True)
+    return path
+
+
 def run_entry(*command: str, domain: int | None, timeout: float = 60, cwd: Path | None = None,
               env: dict[str, str] | None = None) -> Outcome:
     """Run an entry point to its end, or kill it and its children after ``timeout`` s (code None)."""
-    cwd = Path(cwd) if cwd is not None else Path(tempfile.mkdtemp(prefix="bad_input_"))
+    cwd = Path(cwd) if cwd is not None else Path(tempfile.mkdtemp(prefix="run_", dir=_scratch()))
     full_env = {k: v for k, v in (os.environ if env is None else env).items() if k != "ROS_DOMAIN_ID"}
     full_env.update(PYTHONUNBUFFERED="1", **({} if domain is None else {"ROS_DOMAIN_ID": str(domain)}))
     proc = subprocess.Popen([entry_point(command[0]), *command[1:]], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
