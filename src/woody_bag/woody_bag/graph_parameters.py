@@ -9,9 +9,16 @@ for an answer; the answers replace the node's values as they come. Names are ``<
 
 from __future__ import annotations
 
+import math
+import time
+
 from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
+
+ANSWER_WAIT_S = 10.0
+"""A node's request is sent again after this long without an answer (a request that reaches a node before it has
+matched this node's reply reader gets no reply)."""
 
 
 class GraphParameters:
@@ -22,21 +29,22 @@ class GraphParameters:
         self.values: dict[str, object] = {}
         """Replaced, never changed in place, so another thread may read it at any time."""
         self._clients: dict[str, tuple] = {}
-        self._pending: set[str] = set()
+        self._pending: dict[str, float] = {}
+        """Node -> when its request went out (monotonic s)."""
 
     def refresh(self) -> None:
         """Ask every node that has no request in flight for its parameters."""
         own = self.node.get_fully_qualified_name()
         for name, namespace in self.node.get_node_names_and_namespaces():
             target = f"{namespace.rstrip('/')}/{name}"
-            if target == own or target in self._pending:
+            if target == own or time.monotonic() - self._pending.get(target, -math.inf) < ANSWER_WAIT_S:
                 continue
             if target not in self._clients:
                 self._clients[target] = (self.node.create_client(ListParameters, f"{target}/list_parameters"),
                                          self.node.create_client(GetParameters, f"{target}/get_parameters"))
             listing, _ = self._clients[target]
             if listing.service_is_ready():
-                self._pending.add(target)
+                self._pending[target] = time.monotonic()
                 listing.call_async(ListParameters.Request()).add_done_callback(
                     lambda future, target=target: self._on_list(target, future))
 
@@ -44,13 +52,13 @@ class GraphParameters:
         names = list(future.result().result.names) if future.result() is not None else []
         _, getting = self._clients[target]
         if not names or not getting.service_is_ready():
-            self._pending.discard(target)
+            self._pending.pop(target, None)
             return
         getting.call_async(GetParameters.Request(names=names)).add_done_callback(
             lambda done: self._on_values(target, names, done))
 
     def _on_values(self, target: str, names: list[str], future) -> None:
-        self._pending.discard(target)
+        self._pending.pop(target, None)
         if future.result() is None:
             return
         fresh = {name: value for name, value in self.values.items() if not name.startswith(f"{target}.")}
