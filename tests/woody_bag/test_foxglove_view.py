@@ -36,12 +36,11 @@ def read_only_parameters(client: Watcher, run: subprocess.Popen) -> tuple[float,
     while run.poll() is None and changed is None:
         if read is None:
             client.send({"op": "getParameters", "parameterNames": [], "id": "get"})
-            read = client.parameter_values.get("get", {}).get(THRESHOLD)
-            if read is not None:
-                client.send({"op": "setParameters", "id": "set", "parameters": [{"name": THRESHOLD, "value": 1.0}]})
         else:
-            changed = client.parameter_values.get("set", {}).get(THRESHOLD)
+            client.send({"op": "setParameters", "id": "set", "parameters": [{"name": THRESHOLD, "value": 1.0}]})
         time.sleep(0.25)
+        read = client.parameter_values.get("get", {}).get(THRESHOLD)
+        changed = client.parameter_values.get("set", {}).get(THRESHOLD)
     assert read is not None and changed is not None, "no parameters while the line ran"
     return read - resolved_calibration().phi_threshold, changed - read
 

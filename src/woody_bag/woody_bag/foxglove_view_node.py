@@ -14,8 +14,9 @@ rosbag2 stores it) and CDR messages, as foxglove_bridge offers it, under the nam
 topic is subscribed on the ROS side only while a client watches it, so an open view with nothing
 watched costs the line only discovery. The line's ``/clock`` is the server's time (Foxglove's clock
 runs at the line's pace). Every node's parameters are offered read-only (``<node>.<parameter>``, read
-every ``PARAMETER_PERIOD_S``; a set request is answered with the values unchanged). Nothing a client
-sends reaches the line: no client publishing, no parameter changes, no services.
+again every few seconds, woody_bag.graph_parameters; a set request is answered with the values
+unchanged). Nothing a client sends reaches the line: no client publishing, no parameter changes, no
+services.
 """
 
 from __future__ import annotations
@@ -41,8 +42,6 @@ QUEUE_DEPTH = 10
 """Keep-last depth of a watched topic: a view shows the newest, it never catches up on a backlog."""
 TIME_PERIOD_S = 0.1
 """Wall seconds between two broadcasts of the line's time."""
-PARAMETER_PERIOD_S = 5.0
-"""Wall seconds between two readings of the graph's parameters (they are set at start-up and rarely change)."""
 
 
 class _Watching(ServerListener):
@@ -93,7 +92,6 @@ class FoxgloveView(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(period, self.discover, clock=steady)
         self.create_timer(0.02, self.follow_clients, clock=steady)
-        self.create_timer(PARAMETER_PERIOD_S, self.parameters.refresh, clock=steady)
         self.discover()
         self.get_logger().info(f"Foxglove view on ws://{host}:{self.server.port} (images at most "
                                f"{1.0 / self.image_period:g} Hz per topic)")
@@ -112,8 +110,7 @@ class FoxgloveView(Node):
             self.channels[topic] = (foxglove.Channel(topic, schema=schema, message_encoding="cdr"), types[0])
         for topic in [t for t in self.channels if self._wanted(t) and t not in self.forwarding]:
             self._subscribe(topic)
-        if not self.parameters.values:  # until the first values come, read them every discovery
-            self.parameters.refresh()
+        self.parameters.refresh()
 
     def _wanted(self, topic: str) -> bool:
         """A topic is forwarded while a client watches it; the clock always (it is the server's time)."""
