@@ -600,9 +600,9 @@ class LineWorld:
         """
         cfg = self.config
         blend = min(1.0, cfg.dt / cfg.normal_force_tau)
-        contacts = {id(physics): _conveyor_contacts(physics) for physics in self._physics if physics.live}
+        contacts = {physics: _conveyor_contacts(physics) for physics in self._physics if physics.live}
         for fillet in dynamic:
-            rows = contacts[id(fillet.physics)]
+            rows = contacts[fillet.physics]
             mine = rows[rows[:, 0] == fillet.body]
             belt_drive(mine[:, 1].astype(np.int64), mine[:, 2:], fillet.state[:, 7:10], fillet.model.masses,
                        fillet.speed, cfg.dt, blend, cfg.friction_static, cfg.friction_dynamic,

@@ -200,16 +200,15 @@ class Grader(Node):
         if self.core is None and info.k[0] > 0:
             now = time.monotonic()
             self.first_info_at = self.first_info_at or now
-            if self.mount_watch.mount(info.header.frame_id) is None and self.mount_watch.waiting(self.first_info_at,
-                                                                                                 now):
-                return  # tracks wait in early_tracks
             height, offset, source = self.mount_watch.geometry(info.header.frame_id, self.camera_height,
                                                                self.edge_offset)
+            if source is None and self.mount_watch.waiting(self.first_info_at, now):
+                return  # tracks wait in early_tracks
             row = edge_row(tuple(info.k), height, offset)
             self.core = FilletGrader(row, self.rules, self.watched_lane if self.side else None, self.side_wait,
                                      self.evaluator_options, info.k[4] / height, self.score, self.fitted_range)
             self.get_logger().info(f"roller edge at image row {row:.1f} (camera_info K; camera height {height:.3f} m "
-                                   f"and edge offset {offset:.3f} m from {source})")
+                                   f"and edge offset {offset:.3f} m from {source or 'the parameters'})")
             early, self.early_tracks = self.early_tracks, deque()
             for msg in early:  # tracks that arrived before camera_info (discovery order) are graded, not lost
                 self.on_tracks(msg)

@@ -54,11 +54,12 @@ class MountWatch:
                                          "and roller edge offset from the parameters")
         return None if problem else mount
 
-    def geometry(self, camera_frame: str, height_m: float, edge_offset_m: float) -> tuple[float, float, str]:
-        """(camera height m, roller edge offset m, where they came from): the mount's, else the parameters'."""
+    def geometry(self, camera_frame: str, height_m: float, edge_offset_m: float) -> tuple[float, float, str | None]:
+        """(camera height m, roller edge offset m, the transform they came from): the mount's, else the given
+        parameters' with None."""
         mount = self.mount(camera_frame)
         if mount is None:
-            return height_m, edge_offset_m, "the parameters"
+            return height_m, edge_offset_m, None
         return mount.height_m, mount.edge_offset_m, f"tf_static {self.belt_frame} -> {camera_frame}"
 
     def waiting(self, since_s: float, now_s: float) -> bool:

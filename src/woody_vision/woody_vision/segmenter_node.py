@@ -140,11 +140,10 @@ class Segmenter(Node):
     def on_camera_info(self, info: CameraInfo) -> None:
         if info.k[0] <= 0 or (self.tracker is not None and self.mount_from_tf):
             return
-        mount = self.mount_watch.mount(info.header.frame_id)
-        if self.tracker is not None and mount is None:
-            return
         height, _, source = self.mount_watch.geometry(info.header.frame_id, self.camera_height, 0.0)
-        self.mount_from_tf = mount is not None
+        if self.tracker is not None and source is None:
+            return
+        self.mount_from_tf = source is not None
         layout = LaneLayout(tuple(info.k), height, self.lanes, self.lane_pitch)
         self.params = dataclasses.replace(self.params, split_width_px=self.max_fillet_width * info.k[0] / height)
         if self.tracker is None:
@@ -153,7 +152,7 @@ class Segmenter(Node):
             self.tracker.lane_layout = layout
         self.info_size = (info.width, info.height)
         self.get_logger().info(f"calibration received: fx={info.k[0]:.1f}, {info.width}x{info.height}; camera "
-                               f"height {height:.3f} m from {source}")
+                               f"height {height:.3f} m from {source or 'the parameters'}")
 
     def on_reset(self, _msg: Empty) -> None:
         self.background.reset()
