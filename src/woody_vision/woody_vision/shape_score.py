@@ -507,10 +507,9 @@ class ShapeEvaluator:
         overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
         frame = self._score(self._reference, clip_body(points, trailing, reference.length_px), stamp, overhang)
         (self._extra if self._closed else self._trace).append(frame)
-        if not self._closed:
-            self._paper_trace.append(frame if image is points else self._score_image(image, stamp, overhang))
         self._contours.append(points)
         if not self._closed:
+            self._paper_trace.append(frame if image is points else self._score_image(image, stamp, overhang))
             overshoot = trailing + reference.centroid_offset_px - self.edge_row
             if overshoot >= 0.0 and overshoot > GAP_FRAMES * self._advance_per_frame():
                 return self._finish(STATUS_UNSCORED, REASON_LATE_CLOSE.format(overshoot))
