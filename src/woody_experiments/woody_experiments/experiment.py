@@ -37,6 +37,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -144,34 +145,36 @@ def _renderer(geometry: LineGeometry, top: bool, side: bool):
 
 def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None = None,
                  side_rate_hz: float = SIDE_RATE_HZ, top_start_x: float | None = TOP_START_X,
-                 stats: dict | None = None) -> list[dict]:
+                 stats: dict | None = None, on_top_frame: Callable[[TopFrame], None] | None = None,
+                 side_frames: bool = False) -> list[dict]:
     """Simulate one run and return one row per lane (RUN_COLUMNS, and "trace": the lane's Φ window per frame).
 
-    ``top_start_x=None`` renders top frames from the start, as does a run whose belt changes speed (the
-    fillet's position is then no longer speed × time); ``stats`` (if given) receives frame counts.
+    ``top_start_x=None`` renders top frames from the start, as does a run whose belt changes speed (the fillet's
+    position is then no longer speed × time) and one with ``on_top_frame``: it gets every top frame the camera
+    delivered with the renderer's truth (:class:`TopFrame`, with ``side_frames`` its side view too); ``stats``
+    (if given) receives frame counts.
     """
-    top_start_x = None if spec.speed_change_fpm else top_start_x
+    top_start_x = None if spec.speed_change_fpm or on_top_frame else top_start_x
     geometry = LineGeometry(lanes=spec.lanes, lane_pitch=spec.lane_pitch_m, spawn_x=SPAWN_X,
                             **top_camera_preset(spec.top_camera))
     placement = spec.placement
     mesh = place_mesh(mesh, placement)
-    renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side)
+    renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side or side_frames)
     calibration = resolved_calibration(spec.calibration)
     world = LineWorld(geometry, config or calibrated_config(calibration, **spec.physics_overrides()))
     speed = fpm_to_mps(spec.speed_fpm)
     mass = (spec.mass if spec.mass is not None else calibration.total_mass_kg) * placement.scale ** 3
-    top = side = None
-    n_top = 0
+    top, side, n_top = None, None, 0
     try:
-        top = _TopView(spec, geometry, top_bg, calibrated_rules(calibration)) if spec.top else None
+        top = _TopView(spec, geometry, top_bg, calibrated_rules(calibration), keep_color=on_top_frame is not None)
+        top = top if spec.top else None
         lanes = _LaneCopies(world, renderer, geometry, world.spawn(mesh, k=spec.k, lane=geometry.watched_lane,
                                                                    mass=mass, speed_mps=speed,
                                                                    lateral_offset=placement.lateral_offset_m))
         if spec.speed_change_fpm:
             world.change_speed(fpm_to_mps(spec.speed_change_fpm), spec.speed_change_at_s)
-        watched_fid = lanes.fillet_id
-        side = _SideView(geometry, side_bg, side_rate_hz, watched_fid) if spec.side else None
-        model = world.model(watched_fid)
+        side = _SideView(geometry, side_bg, side_rate_hz, lanes.fillet_id) if spec.side else None
+        model = world.model(lanes.fillet_id)
         lead_offset = float(model.box_centers[-1, 0] + model.box_half_extents[-1, 0])
         top_dt, next_top = 1.0 / TOP_RATE_HZ, 0.0
         top_done = top is None
@@ -184,7 +187,7 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                 next_top += top_dt * max(1, math.floor((now + 1e-9 - next_top) / top_dt) + 1)
                 if top_start_x is None or n_top or SPAWN_X + speed * now + lead_offset >= top_start_x:
                     poses = lanes.poses()
-                    top.on_frame(*renderer.render_top(poses), now)
+                    _top_step(top, renderer, poses, now, on_top_frame, lanes, side_frames)
                     n_top += 1
                     top_done = len(top.results) >= spec.lanes
             if side is not None and side.due(now):
@@ -202,6 +205,42 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
                       side.result if side is not None else None)
 
 
+@dataclass(frozen=True)
+class TopFrame:
+    """One top frame as the camera delivered it, and the truth only the renderer knows."""
+
+    stamp: float
+    """Sim time (s)."""
+    color: np.ndarray
+    """rgb8 (H, W, 3), the camera's colour (its pixel noise applied)."""
+    depth: np.ndarray
+    """float32 (H, W) metres along the optical axis, the camera's depth (its error model applied; NaN holes)."""
+    instances: np.ndarray
+    """int64 (H, W): the render id of the fillet seen at each pixel, woody_sim.rendering.NO_FILLET elsewhere."""
+    lanes: dict[int, int]
+    """Render id -> lane."""
+    poses: dict[int, np.ndarray]
+    """Render id -> segment poses (N, 7): x, y, z (m, world) and a quaternion."""
+    side_color: np.ndarray | None = None
+    """The side camera's rgb8 frame of the same moment (watched lane only), when asked for."""
+    side_instances: np.ndarray | None = None
+
+
+def _top_step(top: _TopView, renderer, poses: dict, now: float, on_top_frame: Callable[[TopFrame], None] | None,
+              lanes: _LaneCopies, side: bool) -> None:
+    """Render one top frame into the vision path; hand it to ``on_top_frame`` (if given) with the renderer's
+    instance image, and with ``side`` the side view of the same poses."""
+    instances = renderer.instance_image() if on_top_frame else None
+    sensed = top.on_frame(*renderer.render_top(poses, instances), now)
+    if on_top_frame is None or sensed is None:
+        return
+    side_rgb, side_instances = None, None
+    if side:
+        side_instances = renderer.instance_image(top=False)
+        side_rgb = renderer.render_side(poses, side_instances)
+    on_top_frame(TopFrame(now, sensed[1], sensed[0], instances, dict(lanes.lane_of), poses, side_rgb, side_instances))
+
+
 class _LaneCopies:
     """The run's fillet in every lane: one chain in the watched lane, posed into the others shifted across the belt.
 
@@ -215,10 +254,12 @@ class _LaneCopies:
         watched = geometry.watched_lane
         self.shifts: dict[int, float] = {}
         """Render id -> its lane's offset (m) across the belt from the chain's lane."""
+        self.lane_of: dict[int, int] = {}
         for lane in range(geometry.lanes):
             render_id = fillet_id if lane == watched else self.COPY_ID_BASE + lane
             renderer.add_fillet(render_id, lane, world.model(fillet_id).visuals)
             self.shifts[render_id] = geometry.lane_y(lane) - geometry.lane_y(watched)
+            self.lane_of[render_id] = lane
 
     def poses(self) -> dict[int, np.ndarray]:
         """Segment poses of every lane's copy (empty once the chain is gone)."""
@@ -242,7 +283,7 @@ class _TopView:
     """The top camera of one run as the segmenter and grader see it: sensor model, segmentation, tracking, Φ."""
 
     def __init__(self, spec: RunSpec, geometry: LineGeometry, background: tuple[np.ndarray, np.ndarray],
-                 rules: GradingRules) -> None:
+                 rules: GradingRules, keep_color: bool = False) -> None:
         top_cam = geometry.top_camera()
         layout = LaneLayout(tuple(top_cam.k.reshape(-1)), geometry.top_height, spec.lanes, geometry.lane_pitch)
         self.grader = FilletGrader(geometry.top_edge_row(), rules, watched_lane=None,
@@ -255,6 +296,8 @@ class _TopView:
         """Colour noise has its own stream, so the depth noise of a run does not depend on whether colour is used."""
         self.background = BackgroundModel(1 if self.camera.ideal else BACKGROUND_FRAMES)
         self.segmentation = SegmentationParams() if self.camera.ideal else REAL_CAMERA_SEGMENTATION
+        self.keep_color = keep_color
+        """Deliver the colour frame even when the segmentation does not use it."""
         while not self.background.ready:
             self.background.add(*self._sense(*background))
         self.results: dict[int, dict] = {}
@@ -263,19 +306,24 @@ class _TopView:
     def _sense(self, rgb: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """The camera's depth, and its colour when the segmentation uses colour."""
         noisy = self.camera.depth(depth, self.rng)
-        return noisy, self.camera.color(rgb, self.color_rng) if self.segmentation.color_threshold else None
+        wanted = self.segmentation.color_threshold or self.keep_color
+        return noisy, self.camera.color(rgb, self.color_rng) if wanted else None
 
-    def on_frame(self, rgb: np.ndarray, depth: np.ndarray, now: float) -> None:
-        """One rendered RGB-D frame through the sensor model (maybe dropped) and the vision path."""
+    def on_frame(self, rgb: np.ndarray, depth: np.ndarray, now: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """One rendered RGB-D frame through the sensor model and the vision path; the depth and colour the
+        camera delivered (None: it dropped the frame)."""
         if self.camera.drop(self.rng):
-            return
+            return None
         noisy, color = self._sense(rgb, depth)
+        sensed = noisy, color
+        color = color if self.segmentation.color_threshold else None
         blobs = segment_depth(noisy, self.background.depth, self.segmentation, color, self.background.color)
         update = self.tracker.update(blobs, now)
         observations = [TrackObservation(t.track_id, t.lane, belt_outline(t.blob.contour, noisy, self.k, self.height),
                                          t.unseen, t.blob.contour) for t in update.active]
         for graded in self.grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
             self.results.setdefault(graded.lane, _shape_row(graded))
+        return sensed
 
 
 class _SideView:
@@ -360,7 +408,9 @@ def _shape_row(graded) -> dict:
             "solidity_term": float(shape.solidity_term) if paper else math.nan, "line_phi": float(shape.line_phi),
             "speed_mps": graded.conditions.speed_mps, "leading_end": shape.leading_end,
             "turn_deg": graded.conditions.turn_deg, "length_m": graded.conditions.length_m,
-            "rejected": shape.rejected_frames, "status": shape.status, "reason": shape.reason, "trace": trace}
+            "rejected": shape.rejected_frames, "status": shape.status, "reason": shape.reason, "trace": trace,
+            "reference_stamp": shape.reference_stamp,
+            "window_stamps": [f.stamp for f in shape.trace + shape.extra_trace]}
 
 
 def _condition_suffix(spec: RunSpec) -> str:

@@ -103,8 +103,10 @@ def _scan(
 
 
 @numba.njit(cache=True, nogil=True)
-def _compose(zkey, zdepth, zshade, zslot, lohi, colors, rgb, depth, use_depth):  # pragma: no cover - compiled
-    """Write covered pixels over the background (in front of it when ``use_depth``); clear the buffers."""
+def _compose(zkey, zdepth, zshade, zslot, lohi, colors, rgb, depth, use_depth, slot_ids, ids,
+             use_ids):  # pragma: no cover - compiled
+    """Write covered pixels over the background (in front of it when ``use_depth``), and each one's
+    ``slot_ids[slot]`` into ``ids`` when ``use_ids``; clear the buffers."""
     for p in range(lohi[0], lohi[1] + 1):
         if zkey[p] == _EMPTY:
             continue
@@ -114,6 +116,8 @@ def _compose(zkey, zdepth, zshade, zslot, lohi, colors, rgb, depth, use_depth): 
             if not z < depth[p]:
                 continue
             depth[p] = z
+        if use_ids:
+            ids[p] = slot_ids[zslot[p]]
         for ch in range(3):
             rgb[p, ch] = np.uint8(min(max(np.rint(colors[zslot[p], ch] * zshade[p]), 0.0), 255.0))
     lohi[0], lohi[1] = zkey.shape[0], -1
@@ -144,9 +148,12 @@ class ZBuffer:
         _project(verts, np.ascontiguousarray(rot), np.ascontiguousarray(trans), *self._cam, pts, uvz)
         _scan(pts, uvz, faces, self._near, self.w, self.h, int(slot), *self._light, *self._bufs, self._lohi)
 
-    def compose(self, colors: np.ndarray, rgb: np.ndarray, depth: np.ndarray | None = None) -> None:
+    def compose(self, colors: np.ndarray, rgb: np.ndarray, depth: np.ndarray | None = None,
+                ids: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Composite what was drawn over ``rgb`` (H, W, 3) uint8 and, if given, in front of ``depth`` (H, W)
-        float32 (updated), colour ``colors[slot]`` times the shade; then clear for the next frame."""
+        float32 (updated), colour ``colors[slot]`` times the shade; then clear for the next frame. With ``ids`` =
+        (id per slot, (H, W) int64 image), each pixel a fillet covers gets that fillet's id in the image."""
         flat_depth = depth.reshape(-1) if depth is not None else np.zeros(1, np.float32)
+        slot_ids, image = ids if ids is not None else (np.zeros(1, np.int64), np.zeros(1, np.int64))
         _compose(*self._bufs, self._lohi, np.asarray(colors, dtype=np.float64), rgb.reshape(-1, 3), flat_depth,
-                 depth is not None)
+                 depth is not None, np.asarray(slot_ids, dtype=np.int64), image.reshape(-1), ids is not None)

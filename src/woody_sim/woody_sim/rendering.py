@@ -68,6 +68,7 @@ __all__ = [
     "SIDE_ROLLER_RGB",
     "Frames",
     "LineRenderer",
+    "NO_FILLET",
     "RenderProcess",
     "camera_info_fields",
     "fillet_color",
@@ -75,6 +76,8 @@ __all__ = [
     "visuals_from_mesh",
 ]
 
+NO_FILLET = -1
+"""An instance image's value where no fillet is seen (the scene behind)."""
 FRAMES_IN_FLIGHT = 3
 """Frames a :class:`RenderProcess` renders ahead of collection (one shared buffer set each). Three, not two: with
 two, line_sim waited ~4 % of its wall time for a frame while both were in flight."""
@@ -387,26 +390,35 @@ class LineRenderer:
             raise ValueError(f"unknown fillet id {fillet_id!r} (known: {sorted(self._fillets)})") from None
 
     # ---- rendering
-    def render_top(self, poses: Mapping[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """Top camera: rgb uint8 (H, W, 3) and depth float32 (H, W), metres along the optical axis."""
+    def render_top(self, poses: Mapping[int, np.ndarray],
+                   instances: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Top camera: rgb uint8 (H, W, 3) and depth float32 (H, W), metres along the optical axis. With
+        ``instances`` ((H, W) int64), each pixel a fillet is seen in gets its fillet id, the rest are left as
+        they were (:data:`NO_FILLET` from :meth:`instance_image`)."""
         if self._top is None:
             raise RuntimeError("this LineRenderer was built with render_top=False")
         checked = self._check_poses(poses)
         view = self._top
         rgb = view.bg_rgb.copy()
         depth = view.bg_depth.copy()
-        self._draw(view, checked, lane=None, rgb=rgb, depth=depth)
+        self._draw(view, checked, lane=None, rgb=rgb, depth=depth, instances=instances)
         return rgb, depth
 
-    def render_side(self, poses: Mapping[int, np.ndarray]) -> np.ndarray:
-        """Side camera: rgb uint8 (H, W, 3) of the watched lane (other lanes are not drawn)."""
+    def render_side(self, poses: Mapping[int, np.ndarray], instances: np.ndarray | None = None) -> np.ndarray:
+        """Side camera: rgb uint8 (H, W, 3) of the watched lane (other lanes are not drawn); ``instances`` as for
+        :meth:`render_top`."""
         if self._side is None:
             raise RuntimeError("this LineRenderer was built with render_side=False")
         checked = self._check_poses(poses)
         view = self._side
         rgb = view.bg_rgb.copy()
-        self._draw(view, checked, lane=self.geometry.watched_lane, rgb=rgb, depth=None)
+        self._draw(view, checked, lane=self.geometry.watched_lane, rgb=rgb, depth=None, instances=instances)
         return rgb
+
+    def instance_image(self, top: bool = True) -> np.ndarray:
+        """An empty instance image of the top (or side) camera: every pixel :data:`NO_FILLET`."""
+        view = self._top if top else self._side
+        return np.full((view.h, view.w), NO_FILLET, np.int64)
 
     def render(self, poses: Mapping[int, np.ndarray], want_top: bool = True, want_side: bool = True) -> Frames:
         top = self.render_top(poses) if want_top else (None, None)
@@ -423,9 +435,11 @@ class LineRenderer:
         lane: int | None,
         rgb: np.ndarray,
         depth: np.ndarray | None,
+        instances: np.ndarray | None = None,
     ) -> None:
-        """Draw the fillets (of ``lane`` only, if given) over ``rgb`` and in front of ``depth`` in place."""
-        colors = []
+        """Draw the fillets (of ``lane`` only, if given) over ``rgb`` and in front of ``depth`` in place, and
+        their ids into ``instances`` if given."""
+        colors, ids = [], []
         for fl, pose in checked:
             if lane is not None and fl.lane != lane:
                 continue
@@ -435,8 +449,10 @@ class LineRenderer:
             m = np.matmul(view.rot.T[None, :, :], quaternions_to_matrices(pose[:, 3:7]))  # link -> optical
             view.zbuffer.draw(fl.verts, fl.faces, m, t_opt, len(colors))
             colors.append(fl.color)
+            ids.append(fl.fillet_id)
         if colors:
-            view.zbuffer.compose(np.array(colors), rgb, depth)
+            labels = None if instances is None else (np.array(ids), instances)
+            view.zbuffer.compose(np.array(colors), rgb, depth, labels)
 
 
 def _in_view(camera: PinholeCamera, t_opt: np.ndarray, radius: np.ndarray) -> bool:

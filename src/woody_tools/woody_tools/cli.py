@@ -15,6 +15,8 @@ SUBCOMMANDS = [
     ("sweep", "sweep", "the paper's drop-test grid (meshes x k x speed), parallel and resumable; runs.csv, results.md"),
     ("evaluate", "evaluate", "the live line over a grid of seeds x conditions x lanes x speeds, one woody run each, "
                              "resumable; evaluation.md, evaluation.csv"),
+    ("dataset", "dataset", "labelled frames of a grid of runs: COCO instance masks, per-fillet sequences, splits by "
+                           "mesh; resumable"),
     ("meshes", "meshes",
      "mesh sets: `woody meshes stats SPEC...` prints shape descriptors per mesh and per set"),
     ("calibrate", "calibrate", "fit M, c and the drive friction to the paper's side view, choose the Φ threshold; "
