@@ -244,14 +244,14 @@ def probe_order(runs: list, probe: int) -> list:
 
 
 def run_tasks(client, evaluate: Evaluate, runs: list[RunSpec], meshes: dict[str, FilletMesh],
-              on_rows: Callable[[list[dict]], None], desc: str, probe: int = 0) -> Throughput:
+              on_rows: Callable[[list[dict]], None], desc: str, probe: int = 0, unit: str = "evals") -> Throughput:
     """Evaluate every run on the cluster; ``on_rows`` gets each batch of finished rows on the client.
 
     With ``probe`` > 1 and more than one worker, the first ``probe`` runs go
     one at a time (one worker busy) to measure the one-worker rate, all but
     the first (the worker's warm-up) timed. A task
     that fails on the cluster (its mesh cannot be loaded there, or it killed
-    workers) gives no rows and is listed in ``failed``.
+    workers) gives no rows and is listed in ``failed``. The progress bar shows rows per minute, named ``unit``.
     """
     from tqdm import tqdm
 
@@ -267,7 +267,7 @@ def run_tasks(client, evaluate: Evaluate, runs: list[RunSpec], meshes: dict[str,
 
     with tqdm(total=len(runs), unit="run", desc=desc, dynamic_ncols=True, file=sys.stderr) as bar:
         def collect(futures: list, batches: bool) -> None:
-            _gather(futures, stats, on_rows, bar, start, batches)
+            _gather(futures, stats, on_rows, bar, start, batches, unit)
 
         for i, run in enumerate(runs[:probe]):
             collect([submit(i, run)], batches=False)
@@ -281,7 +281,7 @@ def run_tasks(client, evaluate: Evaluate, runs: list[RunSpec], meshes: dict[str,
     return stats
 
 
-def _gather(futures: list, stats: Throughput, on_rows, bar, start: float, batches: bool) -> None:
+def _gather(futures: list, stats: Throughput, on_rows, bar, start: float, batches: bool, unit: str) -> None:
     """Hand rows to ``on_rows`` as tasks finish, one call per burst of finished tasks."""
     done = as_completed(futures)
     pending: list[dict] = []
@@ -294,7 +294,7 @@ def _gather(futures: list, stats: Throughput, on_rows, bar, start: float, batche
             bar.update(1)
             if not (batches and done.has_ready()):
                 _hand_over(pending, stats, on_rows)
-            bar.set_postfix_str(f"{stats.evaluations / max(time.perf_counter() - start, 1e-9) * 60:.0f} evals/min")
+            bar.set_postfix_str(f"{stats.evaluations / max(time.perf_counter() - start, 1e-9) * 60:.0f} {unit}/min")
     except BaseException:
         _hand_over(pending, stats, on_rows)  # Ctrl-C: keep what arrived, stop the rest
         for future in futures:

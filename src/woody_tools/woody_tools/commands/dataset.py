@@ -129,7 +129,7 @@ def _render(args: argparse.Namespace, todo: list, meshes: dict) -> bool:
     try:
         with cluster.connect(args.scheduler, min(args.jobs, len(todo)), "woody dataset") as client:
             stats = cluster.run_tasks(client, functools.partial(dataset.render_run, options=options), todo, meshes,
-                                      count, "dataset")
+                                      count, "dataset", unit="runs")
     except cluster.ClusterUnavailable as exc:
         print(f"woody dataset: {exc}", file=sys.stderr)
         return False
