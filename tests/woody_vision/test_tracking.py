@@ -225,3 +225,17 @@ def test_a_fillet_whose_blob_merged_for_a_while_takes_it_back_from_a_fresher_gho
     update = tracker.update([square_blob(340, 200 + 8 * 7)], 7 / FPS)
     assert [t.track_id for t in update.active if t.unseen == 0] == [fillet]
     assert ahead in [t.track_id for t in update.active]
+
+
+def test_a_blob_merged_with_the_next_lanes_for_a_frame_does_not_hand_the_track_across():
+    """Two lanes 60 px apart: one frame, the left fillet's blob merges with the right one's (one wide blob in
+    between, the left track takes it). Next frame both are apart again: each track keeps its own fillet, because
+    a fillet rides the belt along the rows and the merged blob's sideways jump is no motion."""
+    tracker = CentroidTracker(max_distance_px=40.0, max_unseen=15)
+    for i in range(4):
+        update = tracker.update([square_blob(360, 200 + 10 * i), square_blob(420, 210 + 10 * i)], i / FPS)
+    left, right = (t.track_id for t in sorted(update.active, key=lambda t: t.blob.centroid[0]))
+    tracker.update([square_blob(388, 250, half=30)], 4 / FPS)  # the merged blob, nearer the left prediction
+    update = tracker.update([square_blob(360, 250), square_blob(420, 260)], 5 / FPS)
+    columns = {t.track_id: t.blob.centroid[0] for t in update.active if t.unseen == 0}
+    assert columns == {left: 360.0, right: 420.0}
