@@ -6,11 +6,11 @@ centroid and the blob centroids, gated by ``max_distance_px``; within the gate
 a track seen in the previous frame is preferred over a stale one (being unseen
 costs 2 × the gate in the assignment), and among stale ones the nearer
 prediction wins, however many frames each went unseen. The prediction
-is the last centroid row plus the last observed motion along the rows times the
-time since that sighting, at the track's mean column: fillets ride the belt
-along the image rows, and a blob that merged with a neighbour's for a frame
-jumps sideways, which is no motion (extrapolated, it handed the track to the
-neighbour in the next lane). The time comes from the frames' stamps: a frame the camera or the network
+is the last centroid plus the last observed motion along the rows times the
+time since that sighting: fillets ride the belt along the image rows, and a
+blob that merged with a neighbour's for a frame jumps sideways, which is no
+motion (extrapolated, it handed the track to the neighbour in the next lane).
+The time comes from the frames' stamps: a frame the camera or the network
 dropped never reaches the tracker, so counting updates would predict one
 frame's motion across a gap of several, and a burst of 5–8 lost frames split
 every fillet in view into two unscored tracks. Unmatched blobs open tracks with
@@ -140,8 +140,7 @@ class CentroidTracker:
         velocity[:, 0] = 0.0
         unseen = np.array([t.unseen > 0 for t in tracks])
         velocity[unseen, 1] = np.maximum(velocity[unseen, 1], _belt_speed(tracks))
-        seen_at = np.array([(self._sum_u[i] / self._hits[i], t.blob.centroid[1]) for i, t in zip(ids, tracks)])
-        predicted = seen_at + velocity * elapsed[:, None]
+        predicted = np.array([t.blob.centroid for t in tracks]) + velocity * elapsed[:, None]
         centroids = np.array([b.centroid for b in blobs], dtype=float)
         distance = np.linalg.norm(predicted[:, None, :] - centroids[None, :, :], axis=2)
         # Live tracks come first: a stale track's extrapolated ghost (e.g. of a fillet that fell off the edge
