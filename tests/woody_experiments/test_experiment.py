@@ -23,6 +23,13 @@ def test_a_run_seen_through_a_noisy_camera_is_scored_and_reproducible():
     assert math.isfinite(noisy[0]["phi"]) and noisy[0]["phi"] != ideal[0]["phi"]
 
 
+def test_a_side_view_only_run_measures_the_watched_lane_without_a_top_camera():
+    """`woody calibrate` fits the physics on side-view-only runs (top=False): no top camera is built."""
+    mesh = load_mesh_set("builtin")[0][0]
+    rows = evaluate_run(RunSpec(mesh.name, 100.0, 100.0, lanes=1, top=False), mesh)
+    assert len(rows) == 1 and math.isfinite(rows[0]["nmdm"]) and rows[0]["status"] == ""
+
+
 def test_a_fillet_lying_turned_on_the_belt_is_simulated_turned_and_still_scored(monkeypatch):
     from woody_experiments import experiment
 

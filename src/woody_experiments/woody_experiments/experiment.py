@@ -143,6 +143,12 @@ def _renderer(geometry: LineGeometry, top: bool, side: bool):
     return renderer, top_bg, side_bg
 
 
+def run_geometry(spec: RunSpec) -> LineGeometry:
+    """The line of one run: its lanes, lane pitch and top camera, fillets spawned at ``SPAWN_X``."""
+    return LineGeometry(lanes=spec.lanes, lane_pitch=spec.lane_pitch_m, spawn_x=SPAWN_X,
+                        **top_camera_preset(spec.top_camera))
+
+
 def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None = None,
                  side_rate_hz: float = SIDE_RATE_HZ, top_start_x: float | None = TOP_START_X,
                  stats: dict | None = None, on_top_frame: Callable[[TopFrame], None] | None = None,
@@ -155,8 +161,7 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     (if given) receives frame counts.
     """
     top_start_x = None if spec.speed_change_fpm or on_top_frame else top_start_x
-    geometry = LineGeometry(lanes=spec.lanes, lane_pitch=spec.lane_pitch_m, spawn_x=SPAWN_X,
-                            **top_camera_preset(spec.top_camera))
+    geometry = run_geometry(spec)
     placement = spec.placement
     mesh = place_mesh(mesh, placement)
     renderer, top_bg, side_bg = _renderer(geometry, spec.top, spec.side or side_frames)
@@ -166,8 +171,8 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
     mass = (spec.mass if spec.mass is not None else calibration.total_mass_kg) * placement.scale ** 3
     top, side, n_top = None, None, 0
     try:
-        top = _TopView(spec, geometry, top_bg, calibrated_rules(calibration), keep_color=on_top_frame is not None)
-        top = top if spec.top else None
+        top = (_TopView(spec, geometry, top_bg, calibrated_rules(calibration), keep_color=on_top_frame is not None)
+               if spec.top else None)
         lanes = _LaneCopies(world, renderer, geometry, world.spawn(mesh, k=spec.k, lane=geometry.watched_lane,
                                                                    mass=mass, speed_mps=speed,
                                                                    lateral_offset=placement.lateral_offset_m))
@@ -315,15 +320,14 @@ class _TopView:
         if self.camera.drop(self.rng):
             return None
         noisy, color = self._sense(rgb, depth)
-        sensed = noisy, color
-        color = color if self.segmentation.color_threshold else None
-        blobs = segment_depth(noisy, self.background.depth, self.segmentation, color, self.background.color)
+        used = color if self.segmentation.color_threshold else None
+        blobs = segment_depth(noisy, self.background.depth, self.segmentation, used, self.background.color)
         update = self.tracker.update(blobs, now)
         observations = [TrackObservation(t.track_id, t.lane, belt_outline(t.blob.contour, noisy, self.k, self.height),
                                          t.unseen, t.blob.contour) for t in update.active]
         for graded in self.grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
             self.results.setdefault(graded.lane, _shape_row(graded))
-        return sensed
+        return noisy, color
 
 
 class _SideView:
