@@ -47,9 +47,9 @@ import yaml
 from pycocotools import mask as coco_mask
 
 from woody_common.line import fpm_to_mps
-from woody_experiments.experiment import RunSpec, TopFrame, evaluate_run
+from woody_experiments.experiment import RunSpec, TopFrame, evaluate_run, run_geometry
 from woody_experiments.line_grade import GRADES, true_grade
-from woody_sim.line_geometry import LineGeometry, PinholeCamera, top_camera_preset
+from woody_sim.line_geometry import PinholeCamera
 from woody_sim.meshes import BUILTIN_DIR, FilletMesh
 from woody_sim.rendering import camera_info_fields
 
@@ -112,7 +112,7 @@ def render_run(spec: RunSpec, mesh: FilletMesh, options: RunOptions) -> list[dic
     run_dir = root / "runs" / name
     writer = _FrameWriter(run_dir, options.side)
     rows = evaluate_run(spec, mesh, on_top_frame=writer.add, side_frames=options.side)
-    geometry = LineGeometry(lanes=spec.lanes, lane_pitch=spec.lane_pitch_m, **top_camera_preset(spec.top_camera))
+    geometry = run_geometry(spec)
     _write_camera_info(run_dir / "camera_info" / "top.yaml", geometry.top_camera(), "top")
     if options.side:
         _write_camera_info(run_dir / "camera_info" / "side.yaml", geometry.side_camera(), "side")
@@ -142,25 +142,18 @@ class _FrameWriter:
         color, depth = f"top/color/{index:04d}.png", f"top/depth/{index:04d}.png"
         _write_png(self.run_dir / color, cv2.cvtColor(frame.color, cv2.COLOR_RGB2BGR))
         _write_png(self.run_dir / depth, depth_png(frame.depth))
-        masks = {lane: frame.instances == render_id for render_id, lane in frame.lanes.items()}
-        masks = {lane: m for lane, m in masks.items() if m.any()}
         self.records.append({"index": index, "stamp": round(frame.stamp, 6), "file": color, "depth_file": depth,
                              "width": int(frame.color.shape[1]), "height": int(frame.color.shape[0]),
-                             "fillets": [_instance(m, lane, _placement_x(frame, lane)) for lane, m in masks.items()]})
+                             "fillets": _instances(frame, frame.instances)})
         if self.side:
             self._add_side(frame, index)
 
     def _add_side(self, frame: TopFrame, index: int) -> None:
         color = f"side/color/{index:04d}.png"
         _write_png(self.run_dir / color, cv2.cvtColor(frame.side_color, cv2.COLOR_RGB2BGR))
-        fillets = []
-        for render_id, lane in frame.lanes.items():
-            mask = frame.side_instances == render_id
-            if mask.any():
-                fillets.append(_instance(mask, lane, _placement_x(frame, lane)))
         self.side_records.append({"index": index, "stamp": round(frame.stamp, 6), "file": color,
                                   "width": int(frame.side_color.shape[1]), "height": int(frame.side_color.shape[0]),
-                                  "fillets": fillets})
+                                  "fillets": _instances(frame, frame.side_instances)})
 
 
 def depth_png(depth_m: np.ndarray) -> np.ndarray:
@@ -175,17 +168,20 @@ def encode_mask(mask: np.ndarray) -> dict:
     return {"size": [int(s) for s in rle["size"]], "counts": rle["counts"].decode("ascii")}
 
 
-def _instance(mask: np.ndarray, lane: int, where: dict) -> dict:
-    v, u = np.nonzero(mask)
-    bbox = [int(u.min()), int(v.min()), int(u.max() - u.min() + 1), int(v.max() - v.min() + 1)]
-    return {"lane": lane, "area": int(mask.sum()), "bbox": bbox, "segmentation": encode_mask(mask), **where}
-
-
-def _placement_x(frame: TopFrame, lane: int) -> dict:
-    """Where the lane's fillet is along the flow relative to the roller edge (world x = 0; m, + downstream)."""
-    render_id = next(r for r, la in frame.lanes.items() if la == lane)
-    x = frame.poses[render_id][:, 0]
-    return {"centre_x_m": round(float(x.mean()), 5), "front_x_m": round(float(x.max()), 5)}
+def _instances(frame: TopFrame, image: np.ndarray) -> list[dict]:
+    """One record per fillet seen in an instance image of the frame: its lane, mask (RLE), box, area, and where
+    it is along the flow relative to the roller edge (world x = 0; m, + downstream)."""
+    out = []
+    for render_id, lane in frame.lanes.items():
+        mask = image == render_id
+        if not mask.any():
+            continue
+        v, u = np.nonzero(mask)
+        x = frame.poses[render_id][:, 0]
+        out.append({"lane": lane, "area": int(mask.sum()), "segmentation": encode_mask(mask),
+                    "bbox": [int(u.min()), int(v.min()), int(u.max() - u.min() + 1), int(v.max() - v.min() + 1)],
+                    "centre_x_m": round(float(x.mean()), 5), "front_x_m": round(float(x.max()), 5)})
+    return out
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:
@@ -275,9 +271,14 @@ def _crop(image: np.ndarray, u0: int, v0: int, size: tuple[int, int]) -> np.ndar
 
 # ---------------------------------------------------------------- the index files, on the client
 
+def finished_runs(root: Path) -> list[Path]:
+    """The records of every finished run in a data set folder, in name order."""
+    return sorted((root / "runs").glob(f"*/{RUN_RECORD}"))
+
+
 def read_records(root: Path) -> dict[str, dict]:
     """Run name -> record of every finished run in a data set folder."""
-    return {p.parent.name: json.loads(p.read_text()) for p in sorted((root / "runs").glob(f"*/{RUN_RECORD}"))}
+    return {p.parent.name: json.loads(p.read_text()) for p in finished_runs(root)}
 
 
 def coco_files(records: Sequence[dict], splits: dict[str, str], camera: str = "top") -> dict[str, dict]:

@@ -80,14 +80,15 @@ def run(args: argparse.Namespace) -> int:
     runs = sweep.plan(list(meshes), args.k, args.speeds, args.lanes, calibration.total_mass_kg, side=False,
                       top_camera=args.top_camera, sensor=args.sensor, conditions=tuple(args.conditions),
                       calibration=calibration_path)
-    done = dataset.read_records(out)
+    done = {path.parent.name for path in dataset.finished_runs(out)}
     todo = [r for r in runs if dataset.run_name(r) not in done]
     print(f"woody dataset: {len(meshes)} meshes x {len(args.k)} k x {len(args.speeds)} speeds x "
           f"{len(args.conditions)} conditions = {len(runs)} runs of {args.lanes} lanes ({len(runs) - len(todo)} "
           f"already in {out}, {len(todo)} to go)", file=sys.stderr)
     if not _render(args, todo, meshes):
         return 2
-    records = [r for name, r in dataset.read_records(out).items() if name in {dataset.run_name(s) for s in runs}]
+    names = {dataset.run_name(spec) for spec in runs}
+    records = [r for name, r in dataset.read_records(out).items() if name in names]
     missing = len(runs) - len(records)
     _write_index(out, records, meshes, settings)
     print(f"woody dataset: wrote {out / 'README.md'}", file=sys.stderr)
