@@ -134,12 +134,7 @@ def test_killed_recorder_leaves_its_written_chunks_readable(ros_domain, spawn_he
     assert safe >= 60
 
     path = tmp_path / "run.mcap"
-    clock: list[int] = []
-    with pytest.raises(BagError, match=r"run\.mcap: truncated after \d+ messages at t=[\d.]+s"):
-        for topic, msg in published(path):
-            assert msg == known(topic, index_of(topic, msg), small_images=True)
-            if topic == "/clock":
-                clock.append(index_of(topic, msg))
+    clock, read = _read_until_truncated(path)
     assert clock == list(range(len(clock))) and len(clock) >= safe, (len(clock), safe)
 
     # mcap's own streaming reader recovers the same chunks
@@ -154,11 +149,24 @@ def test_killed_recorder_leaves_its_written_chunks_readable(ros_domain, spawn_he
     summary = bag_summary(path)
     assert not summary["complete"] and "truncated" in summary["error"]
 
-    _check_recovered(path, tmp_path / "fixed.mcap", safe, len(clock))
+    _check_recovered(path, tmp_path / "fixed.mcap", read, len(clock))
 
 
-def _check_recovered(path, fixed, safe: int, clock_count: int) -> None:
-    """`woody bag recover` turns a cut bag into a complete, indexed bag that rosbags and mcap open."""
+def _read_until_truncated(path) -> tuple[list[int], int]:
+    """Reads a cut bag up to its cut: the /clock indices seen and the number of messages read."""
+    clock: list[int] = []
+    read = 0
+    with pytest.raises(BagError, match=rf"{path.name}: truncated after \d+ messages at t=[\d.]+s"):
+        for topic, msg in published(path):
+            assert msg == known(topic, index_of(topic, msg), small_images=True)
+            clock += [index_of(topic, msg)] if topic == "/clock" else []
+            read += 1
+    return clock, read
+
+
+def _check_recovered(path, fixed, read: int, clock_count: int) -> None:
+    """`woody bag recover` turns a cut bag into a complete, indexed bag that rosbags and mcap open, keeping
+    every message a reader got before the cut (the last round of topics may be cut part-way)."""
     import subprocess
 
     from mcap.reader import make_reader
@@ -169,7 +177,7 @@ def _check_recovered(path, fixed, safe: int, clock_count: int) -> None:
     result = subprocess.run([entry_point("woody"), "bag", "recover", str(path), str(fixed)], capture_output=True,
                             text=True, timeout=120)
     assert result.returncode == 0 and "truncated after" in result.stdout, result.stderr
-    assert bag_summary(fixed)["complete"] and bag_summary(fixed)["message_count"] >= safe * len(TOPICS)
+    assert bag_summary(fixed)["complete"] and bag_summary(fixed)["message_count"] >= read
     with AnyReader([fixed]) as reader:
         clock_connections = [c for c in reader.connections if c.topic == "/clock"]
         assert len(list(reader.messages(connections=clock_connections))) == clock_count
@@ -276,10 +284,6 @@ def test_a_recorder_at_its_file_size_limit_stops_with_one_line_and_a_readable_ba
     assert f"stopped recording: {bag}: File too large (EFBIG)" in errors[0], errors[0]
     assert f"`woody bag recover {bag} OUT.mcap`" in errors[0], errors[0]
     assert bag.stat().st_size < limit  # cut back to its last whole record
-    clock = []
-    with pytest.raises(BagError, match=r"truncated after \d+ messages"):
-        for topic, msg in published(bag):
-            assert msg == known(topic, index_of(topic, msg), small_images=True)
-            clock += [index_of(topic, msg)] if topic == "/clock" else []
+    clock, read = _read_until_truncated(bag)
     assert clock == list(range(len(clock))) and len(clock) >= 5, clock
-    _check_recovered(bag, tmp_path / "fixed.mcap", len(clock), len(clock))
+    _check_recovered(bag, tmp_path / "fixed.mcap", read, len(clock))
