@@ -406,3 +406,21 @@ def test_fillets_side_by_side_reaching_past_the_roller_edge_are_split_by_their_m
     blobs = segment_height_map(height, params)
     assert len(blobs) == 2
     assert sorted(round(b.centroid[0] / 10) for b in blobs) == [9, 15]
+
+
+def test_a_wide_fillet_reading_thicker_over_the_roller_crown_is_not_split_along_the_flow():
+    """A turned fillet wider than ``split_width_px`` crossing the edge: over the roller's crown the background falls
+    away, so a band of it reads as high as its middle, a second thick core ahead of the first. One fillet's thick
+    parts one behind the other are not fillets side by side: it stays one blob."""
+    rows, cols = np.mgrid[0:200, 0:240]
+    across, along = (cols - 120.0) / 45.0, (rows - 90.0) / 70.0
+    inside = across ** 2 + along ** 2 < 1.0
+    dome = 0.004 + 0.018 * np.sqrt(np.clip(1.0 - across ** 2 - along ** 2, 0, 1))
+    height = np.where(inside, dome, 0.0).astype(np.float32)
+    crown = inside & (rows >= 148) & (rows < 154)
+    height[crown] = 0.021  # the band over the crown, higher than 0.75 x the middle's 0.022 m
+    height[inside & (rows >= 154)] = 0.6  # the front over the floor
+    params = SegmentationParams(split_width_px=80.0)
+    assert cv2.boundingRect((height > 0).astype(np.uint8))[2] > params.split_width_px, "precondition: wide"
+    (blob,) = segment_height_map(height, params)
+    assert blob.area_px > 0.95 * np.count_nonzero(inside)

@@ -352,6 +352,7 @@ def _split_by_height(component: np.ndarray, height: np.ndarray,
     cores = cv2.compare(relief, params.height_core_ratio * float(relief.max()), cv2.CMP_GT)
     n_cores, markers, stats, _ = cv2.connectedComponentsWithStats(cores, connectivity=8, ltype=cv2.CV_32S)
     big = [c for c in range(1, n_cores) if stats[c, cv2.CC_STAT_AREA] * 8 >= params.min_area_px]
+    big = [c for c in big if any(_side_by_side(stats[c], stats[d]) for d in big if d != c)]
     if len(big) < 2:
         return None
     markers = np.where(np.isin(markers, big), markers, 0).astype(np.int32)
@@ -359,11 +360,25 @@ def _split_by_height(component: np.ndarray, height: np.ndarray,
     return _region_masks(labels, big)
 
 
+def _side_by_side(core: np.ndarray, other: np.ndarray) -> bool:
+    """Whether two cores (connected-component stats rows) lie beside each other across the flow, sharing at least
+    ``SIDE_BY_SIDE_OVERLAP`` of the shorter one's rows. A thick part ahead of or behind a core is the same fillet
+    (a fillet reads thicker where it lies over the roller's crown, since the background falls away there) or a
+    fillet one behind the other, which a neck separates (:func:`_split_by_distance`), never one beside it."""
+    top, other_top = core[cv2.CC_STAT_TOP], other[cv2.CC_STAT_TOP]
+    bottom = core[cv2.CC_STAT_TOP] + core[cv2.CC_STAT_HEIGHT]
+    other_bottom = other[cv2.CC_STAT_TOP] + other[cv2.CC_STAT_HEIGHT]
+    shared = min(bottom, other_bottom) - max(top, other_top)
+    return shared >= SIDE_BY_SIDE_OVERLAP * min(core[cv2.CC_STAT_HEIGHT], other[cv2.CC_STAT_HEIGHT])
+
+
 def _region_masks(labels: np.ndarray, regions) -> list[tuple[np.ndarray, None]]:
     """One mask (255 inside) per watershed region, outlines still to be traced."""
     return [(np.where(labels == region, np.uint8(255), np.uint8(0)), None) for region in regions]
 
 
+SIDE_BY_SIDE_OVERLAP = 0.25
+"""Two thick cores split a wide component only when they share this fraction of the shorter core's rows."""
 MAX_LYING_HEIGHT_M = 0.1
 """No fillet lying on the belt is this thick; higher pixels are past the roller edge, over the floor."""
 NOTCH_DEPTH_RATIO = 0.1
