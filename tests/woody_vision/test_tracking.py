@@ -239,3 +239,17 @@ def test_a_blob_merged_with_the_next_lanes_for_a_frame_does_not_hand_the_track_a
     update = tracker.update([square_blob(360, 250), square_blob(420, 260)], 5 / FPS)
     columns = {t.track_id: t.blob.centroid[0] for t in update.active if t.unseen == 0}
     assert columns == {left: 360.0, right: 420.0}
+
+
+def test_a_fillet_merged_with_the_one_hanging_ahead_for_a_frame_keeps_its_track_from_the_piece_beside_it():
+    """A fillet reaches the edge while the one ahead of it still hangs there: for one frame their blobs merge (the
+    centroid jumps 26 px ahead, and with it the next prediction) and a piece split off opens a track beside it.
+    Next frame the fillet's blob is nearer the piece's track than the fillet's own jumped prediction, and still
+    stays with the fillet's track: a track opened a frame ago does not outbid an established one."""
+    tracker = CentroidTracker(max_distance_px=40.0, max_unseen=15)
+    for i in range(6):
+        update = tracker.update([square_blob(385, 173 + 11 * i)], i / FPS)
+    (fillet,) = (t.track_id for t in update.active)
+    tracker.update([square_blob(386, 254, half=30), square_blob(368, 263, half=8)], 6 / FPS)
+    update = tracker.update([square_blob(384, 250)], 7 / FPS)
+    assert [t.track_id for t in update.active if t.unseen == 0] == [fillet]

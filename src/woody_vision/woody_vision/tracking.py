@@ -4,8 +4,9 @@ Blobs are matched to tracks with a minimum-total-distance assignment
 (``scipy.optimize.linear_sum_assignment``) between each track's predicted
 centroid and the blob centroids, gated by ``max_distance_px``; within the gate
 a track seen in the previous frame is preferred over a stale one (being unseen
-costs 2 × the gate in the assignment), and among stale ones the nearer
-prediction wins, however many frames each went unseen. The prediction
+costs 2 × the gate in the assignment), an established track over one opened in
+the last frames (half the gate), and among stale ones the nearer prediction
+wins, however many frames each went unseen. The prediction
 is the last centroid plus the last observed motion along the rows times the
 time since that sighting: fillets ride the belt along the image rows, and a
 blob that merged with a neighbour's for a frame jumps sideways, which is no
@@ -41,6 +42,11 @@ half its speed, so after a burst of lost frames the prediction can fall that muc
 NO_LANE = -1
 BELT_SPEED_MIN_AGE = 3
 """Updates a track must have lived before its motion tells the belt's speed (it has none on the frame it opens)."""
+NEWBORN_PENALTY = 0.5
+"""A track younger than BELT_SPEED_MIN_AGE costs this fraction of the gate more in the assignment. A fillet
+reaching the edge while the one ahead still hangs there merges with it for a frame: its centroid jumps ahead (and
+so does its next prediction) while a piece split off the merged blob opens a track beside it; the next frame the
+fillet's blob must stay with the fillet's own track, not pass to the piece's track that happens to lie nearer."""
 
 
 @dataclass(frozen=True)
@@ -147,10 +153,11 @@ class CentroidTracker:
         # moving backwards in the image) must not take the blob of the live track right behind it. Among stale
         # tracks the nearer prediction wins, however long each went unseen: a fillet whose blob merged with its
         # neighbour's for a few frames takes its blob back from the ghost of the fillet that left ahead of it.
-        stale = np.array([self._tracks[i].unseen > 0 for i in ids], dtype=float)
-        stale_penalty = 2.0 * self.max_distance_px * stale[:, None]
+        stale = np.array([t.unseen > 0 for t in tracks], dtype=float)
+        newborn = np.array([t.age < BELT_SPEED_MIN_AGE for t in tracks], dtype=float)
+        penalty = self.max_distance_px * (2.0 * stale + NEWBORN_PENALTY * newborn)[:, None]
         gate = (self.max_distance_px + GAP_GATE_GROWTH * np.linalg.norm(velocity, axis=1) * elapsed)[:, None]
-        gated = np.where(distance <= gate, distance + stale_penalty, 1e9)
+        gated = np.where(distance <= gate, distance + penalty, 1e9)
         rows, cols = linear_sum_assignment(gated)
         return {ids[r]: int(c) for r, c in zip(rows, cols) if distance[r, c] <= gate[r, 0]}
 
