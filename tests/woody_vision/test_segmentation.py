@@ -424,20 +424,3 @@ def test_a_wide_fillet_reading_thicker_over_the_roller_crown_is_not_split_along_
     assert cv2.boundingRect((height > 0).astype(np.uint8))[2] > params.split_width_px, "precondition: wide"
     (blob,) = segment_height_map(height, params)
     assert blob.area_px > 0.95 * np.count_nonzero(inside)
-
-
-def test_fillets_side_by_side_over_the_roller_crown_are_split_by_their_middles_not_the_crown_band():
-    """Two fillets touching side by side whose fronts hang past the edge; the band of them lying over the roller's
-    crown reads higher than their middles (the background falls away there). The cores are still their middles."""
-    rows, cols = np.mgrid[0:200, 0:240]
-    height = np.zeros((200, 240), np.float32)
-    for centre in (90.0, 150.0):
-        across, along = (cols - centre) / 31.0, (rows - 90.0) / 70.0
-        inside = across ** 6 + along ** 6 < 1.0
-        height = np.maximum(height, np.where(inside, 0.004 + 0.018 * np.sqrt(np.clip(1.0 - across ** 2, 0, 1)), 0.0))
-    solid = height > 0
-    height[solid & (rows >= 140) & (rows < 144)] = 0.033  # the crown band, above the middles' 0.022 m
-    height[solid & (rows >= 144)] = 0.6  # the fronts over the floor
-    blobs = segment_height_map(height, SegmentationParams(split_width_px=80.0))
-    assert len(blobs) == 2
-    assert sorted(round(b.centroid[0] / 10) for b in blobs) == [9, 15]

@@ -345,15 +345,10 @@ def _split_by_height(component: np.ndarray, height: np.ndarray,
     """A wide component split into the fillets around its thick cores (height watershed), or None if it has one.
 
     Pixels higher than a fillet lying on the belt can be (past the roller edge the background is the floor) are
-    left out of the relief: the cores are the middles of the fillets still on the belt. So is any ridge narrower
-    than ``RIDGE_WIDTH_RATIO`` × ``split_width_px`` (a grey opening): where a fillet lies over the roller's crown
-    the background falls away and a thin band of it reads higher than its middle, which would set the cores'
-    level and leave the middles below it.
+    left out of the relief: the cores are the middles of the fillets still on the belt.
     """
     relief = np.asarray(height, np.float32).copy()
     relief[(component == 0) | (relief > MAX_LYING_HEIGHT_M)] = 0.0
-    size = 2 * int(RIDGE_WIDTH_RATIO * params.split_width_px / 2.0) + 1
-    relief = cv2.morphologyEx(relief, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
     cores = cv2.compare(relief, params.height_core_ratio * float(relief.max()), cv2.CMP_GT)
     n_cores, markers, stats, _ = cv2.connectedComponentsWithStats(cores, connectivity=8, ltype=cv2.CV_32S)
     big = [c for c in range(1, n_cores) if stats[c, cv2.CC_STAT_AREA] * 8 >= params.min_area_px]
@@ -382,9 +377,6 @@ def _region_masks(labels: np.ndarray, regions) -> list[tuple[np.ndarray, None]]:
     return [(np.where(labels == region, np.uint8(255), np.uint8(0)), None) for region in regions]
 
 
-RIDGE_WIDTH_RATIO = 0.1
-"""A ridge of the height relief narrower than this × ``split_width_px`` (13 mm for a 0.13 m widest fillet) is no
-fillet's middle."""
 SIDE_BY_SIDE_OVERLAP = 0.25
 """Two thick cores split a wide component only when they share this fraction of the shorter core's rows."""
 MAX_LYING_HEIGHT_M = 0.1
