@@ -47,7 +47,9 @@ frame happens to fall on that ramp (the line speed, which end leads, a turn)
 moves a normal fillet's Φ a lot. The line therefore grades on ``line_phi``:
 Φ_t interpolated at the moment the rigid overhang (trailing edge + L − edge)
 is ``line_fraction`` × L, a physically equivalent moment for every fillet,
-found between the two frames around it. The evaluator keeps scoring past the
+found between the two frames around it, after a one-frame spike (a neighbour's
+outline joined for a frame) is replaced by the median of it and the frames
+either side (:func:`without_spikes`). The evaluator keeps scoring past the
 centroid crossing until that moment is passed (a fillet sent blunt end first
 has its centroid ahead of mid-body, so its window closes earlier). It also
 reports what the decision may depend on, all measured on the reference
@@ -80,7 +82,7 @@ started at or past the edge, or the track ended before the window closed).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 
 import cv2
@@ -338,6 +340,22 @@ def leading_end(contour: np.ndarray) -> str:
     return LEADING_BLUNT if leading > trailing else LEADING_NARROW
 
 
+def without_spikes(frames: list[FrameScore]) -> list[FrameScore]:
+    """The frames with each inner Φ_t replaced by the median of it and its two neighbours.
+
+    A fillet's outline changes smoothly as it tips, so its Φ_t rises (or stays) from frame to frame, and the median
+    of three consecutive values of a rising sequence is the middle one: an uncontaminated line score is unchanged.
+    A single frame in which a neighbour's outline joined the fillet's, or a split cut a piece off it, stands out
+    above both neighbours and is replaced. The first and last frames keep their own values."""
+    phis = [f.phi for f in frames]
+    out = list(frames)
+    for i in range(1, len(frames) - 1):
+        three = phis[i - 1:i + 2]
+        if all(math.isfinite(v) for v in three):
+            out[i] = replace(frames[i], phi=sorted(three)[1])
+    return out
+
+
 def interpolate_at(frames: list[FrameScore], fraction: float) -> tuple[float, int | None, float]:
     """Φ_t at the overhang ``fraction`` between the two frames around it, the index of the nearer one, and the
     overhang between those two frames (how far apart they are).
@@ -539,7 +557,7 @@ class ShapeEvaluator:
 
     def _finish_line(self) -> ShapeResult:
         frames = self._trace + self._extra
-        line_phi, nearer, gap = interpolate_at(frames, self.line_fraction)
+        line_phi, nearer, gap = interpolate_at(without_spikes(frames), self.line_fraction)
         step = self._advance_per_frame() / self._reference.length_px
         if nearer is None or not math.isfinite(line_phi) or is_gap(gap, step):
             return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
