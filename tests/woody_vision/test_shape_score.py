@@ -36,10 +36,10 @@ from woody_vision.shape_score import (
     leading_cut_rows,
     leading_end,
     make_reference,
+    rising_envelope,
     shape_terms,
     solidity,
     turn_deg,
-    without_spikes,
 )
 from woody_vision.synthetic import DEFAULT_TOP_K, TopFillet, TopScene, teardrop_polygon
 
@@ -520,18 +520,17 @@ def test_the_papers_phi_is_measured_on_the_image_outline_and_the_line_score_on_t
     assert len(result.paper_trace) == len(result.trace) and alone.paper_trace == alone.trace
 
 
-def test_a_one_frame_spike_at_the_measuring_point_never_sets_the_line_score_and_a_ramp_is_kept():
-    """The frames of a stiff fillet around its measuring point, one of them with a neighbour's outline joined to
-    it (11.6 among 1.4 and 1.8): the line score is the clean frames' value. A drooping fillet's steep ramp is
-    left exactly as it was."""
+def test_frames_a_neighbour_joined_never_set_the_line_score_and_a_ramp_is_kept():
+    """The frames of a stiff fillet around its measuring point, with a neighbour's outline joined to it in one
+    frame (11.6 among 1.4 and 1.8), or in two (15.4, 10.8 before 2.6): the line score is the clean frames' value.
+    A drooping fillet's steep ramp is left exactly as it was."""
     def frames(phis):
         return [FrameScore(stamp=i / 30.0, phi=phi, hu_term=0.0, solidity_term=0.0, overhang=0.35 + 0.1 * i)
                 for i, phi in enumerate(phis)]
 
-    spiked = frames([0.5, 0.3, 0.4, 1.4, 11.6, 1.8])
-    assert interpolate_at(spiked, 0.72)[0] > 5.0, "precondition: the spike sets the raw interpolation"
-    line_phi = interpolate_at(without_spikes(spiked), 0.72)[0]
-    assert 1.4 <= line_phi <= 1.8
+    for phis, clean in (([0.5, 0.3, 0.4, 1.4, 11.6, 1.8], (1.4, 1.8)), ([0.3, 0.4, 15.4, 10.8, 2.6], (0.4, 2.6))):
+        assert interpolate_at(frames(phis), 0.72)[0] > 5.0, "precondition: the joined frames set the raw score"
+        assert clean[0] <= interpolate_at(rising_envelope(frames(phis)), 0.72)[0] <= clean[1]
     ramp = frames([1.0, 1.5, 2.5, 6.0, 12.0, 19.0])
-    assert [f.phi for f in without_spikes(ramp)] == [f.phi for f in ramp]
-    assert math.isnan(without_spikes(frames([2.0, math.nan, 3.0]))[1].phi)
+    assert [f.phi for f in rising_envelope(ramp)] == [f.phi for f in ramp]
+    assert math.isnan(rising_envelope(frames([2.0, math.nan, 3.0]))[1].phi)

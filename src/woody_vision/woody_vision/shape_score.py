@@ -47,9 +47,10 @@ frame happens to fall on that ramp (the line speed, which end leads, a turn)
 moves a normal fillet's Φ a lot. The line therefore grades on ``line_phi``:
 Φ_t interpolated at the moment the rigid overhang (trailing edge + L − edge)
 is ``line_fraction`` × L, a physically equivalent moment for every fillet,
-found between the two frames around it, after a one-frame spike (a neighbour's
-outline joined for a frame) is replaced by the median of it and the frames
-either side (:func:`without_spikes`). The evaluator keeps scoring past the
+found between the two frames around it, on the rising envelope of Φ_t (each
+frame capped by the lowest later frame, :func:`rising_envelope`): a fillet only
+bends further as it tips, and a frame a neighbour's outline joined stands above
+the frames after it. The evaluator keeps scoring past the
 centroid crossing until that moment is passed (a fillet sent blunt end first
 has its centroid ahead of mid-body, so its window closes earlier). It also
 reports what the decision may depend on, all measured on the reference
@@ -340,19 +341,21 @@ def leading_end(contour: np.ndarray) -> str:
     return LEADING_BLUNT if leading > trailing else LEADING_NARROW
 
 
-def without_spikes(frames: list[FrameScore]) -> list[FrameScore]:
-    """The frames with each inner Φ_t replaced by the median of it and its two neighbours.
+def rising_envelope(frames: list[FrameScore]) -> list[FrameScore]:
+    """The frames with each Φ_t capped by the lowest Φ_t of the frames after it.
 
-    A fillet's outline changes smoothly as it tips, so its Φ_t rises (or stays) from frame to frame, and the median
-    of three consecutive values of a rising sequence is the middle one: an uncontaminated line score is unchanged.
-    A single frame in which a neighbour's outline joined the fillet's, or a split cut a piece off it, stands out
-    above both neighbours and is replaced. The first and last frames keep their own values."""
-    phis = [f.phi for f in frames]
+    A fillet's outline only deforms further as it tips over the edge, so its Φ_t rises (or stays) from frame to
+    frame, and a rising sequence is its own envelope: an uncontaminated line score is unchanged. A frame in which a
+    neighbour's outline joined the fillet's, or a split cut a piece off it, differs from the reference by more than
+    the fillet's own bending: it stands above a later frame and is brought down to it, however many frames in a
+    row were contaminated. Contamination only ever adds to Φ_t, so the lower value is the fillet's own."""
     out = list(frames)
-    for i in range(1, len(frames) - 1):
-        three = phis[i - 1:i + 2]
-        if all(math.isfinite(v) for v in three):
-            out[i] = replace(frames[i], phi=sorted(three)[1])
+    lowest = math.inf
+    for i in range(len(frames) - 1, -1, -1):
+        phi = frames[i].phi
+        if math.isfinite(phi):
+            lowest = min(lowest, phi)
+            out[i] = replace(frames[i], phi=lowest)
     return out
 
 
@@ -557,7 +560,7 @@ class ShapeEvaluator:
 
     def _finish_line(self) -> ShapeResult:
         frames = self._trace + self._extra
-        line_phi, nearer, gap = interpolate_at(without_spikes(frames), self.line_fraction)
+        line_phi, nearer, gap = interpolate_at(rising_envelope(frames), self.line_fraction)
         step = self._advance_per_frame() / self._reference.length_px
         if nearer is None or not math.isfinite(line_phi) or is_gap(gap, step):
             return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
