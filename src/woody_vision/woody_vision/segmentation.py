@@ -365,11 +365,9 @@ def _side_by_side(core: np.ndarray, other: np.ndarray) -> bool:
     ``SIDE_BY_SIDE_OVERLAP`` of the shorter one's rows. A thick part ahead of or behind a core is the same fillet
     (a fillet reads thicker where it lies over the roller's crown, since the background falls away there) or a
     fillet one behind the other, which a neck separates (:func:`_split_by_distance`), never one beside it."""
-    top, other_top = core[cv2.CC_STAT_TOP], other[cv2.CC_STAT_TOP]
-    bottom = core[cv2.CC_STAT_TOP] + core[cv2.CC_STAT_HEIGHT]
-    other_bottom = other[cv2.CC_STAT_TOP] + other[cv2.CC_STAT_HEIGHT]
-    shared = min(bottom, other_bottom) - max(top, other_top)
-    return shared >= SIDE_BY_SIDE_OVERLAP * min(core[cv2.CC_STAT_HEIGHT], other[cv2.CC_STAT_HEIGHT])
+    (top, rows), (other_top, other_rows) = ((c[cv2.CC_STAT_TOP], c[cv2.CC_STAT_HEIGHT]) for c in (core, other))
+    shared = min(top + rows, other_top + other_rows) - max(top, other_top)
+    return shared >= SIDE_BY_SIDE_OVERLAP * min(rows, other_rows)
 
 
 def _region_masks(labels: np.ndarray, regions) -> list[tuple[np.ndarray, None]]:
