@@ -153,9 +153,8 @@ class CentroidTracker:
         # moving backwards in the image) must not take the blob of the live track right behind it. Among stale
         # tracks the nearer prediction wins, however long each went unseen: a fillet whose blob merged with its
         # neighbour's for a few frames takes its blob back from the ghost of the fillet that left ahead of it.
-        stale = np.array([t.unseen > 0 for t in tracks], dtype=float)
         newborn = np.array([t.age < BELT_SPEED_MIN_AGE for t in tracks], dtype=float)
-        penalty = self.max_distance_px * (2.0 * stale + NEWBORN_PENALTY * newborn)[:, None]
+        penalty = self.max_distance_px * (2.0 * unseen + NEWBORN_PENALTY * newborn)[:, None]
         gate = (self.max_distance_px + GAP_GATE_GROWTH * np.linalg.norm(velocity, axis=1) * elapsed)[:, None]
         gated = np.where(distance <= gate, distance + penalty, 1e9)
         rows, cols = linear_sum_assignment(gated)
