@@ -17,7 +17,12 @@ from woody_vision.grader_core import (
     TrackObservation,
 )
 from woody_vision.grading import FittedRange, GradingRules
-from woody_vision.shape_score import REASON_LOST_IN_WINDOW, REASON_STARTED_PAST_EDGE, STATUS_SCORED
+from woody_vision.shape_score import (
+    REASON_LOST_BEFORE_EDGE,
+    REASON_LOST_IN_WINDOW,
+    REASON_STARTED_PAST_EDGE,
+    STATUS_SCORED,
+)
 from woody_vision.side_view import SideMeasurement
 from woody_vision.synthetic import teardrop_polygon
 
@@ -140,6 +145,21 @@ def test_a_fillet_first_seen_past_the_edge_beside_its_lane_neighbour_gets_its_un
     (verdict,) = grader.on_tracks(30 / FPS, [TrackObservation(1, 0, shapes[30]), TrackObservation(2, 0, hidden)])
     assert verdict.fillet_id == 2 and verdict.label == "unscored" and verdict.shape.reason == REASON_STARTED_PAST_EDGE
     assert grader.fragments == 0
+
+
+def test_a_sliver_lost_on_the_belt_beside_its_lane_fillet_gets_no_verdict_but_a_lost_fillet_does():
+    """A crowded lane's split can leave a sliver that lives a few frames on the belt: the fillet it came off gets
+    the verdict, the sliver none; a lost fillet of a fillet's size still gets its unscored verdict."""
+    grader = FilletGrader(EDGE, GradingRules(threshold=1.0))
+    shapes = contours(90)
+    sliver = np.array([[290, 60], [310, 60], [310, 80], [290, 80]], np.int32)
+    other = contours(1, start_tip_v=60.0)[0]  # a whole fillet's outline behind it
+    for i, contour in enumerate(shapes[:5]):
+        observed = [TrackObservation(1, 0, contour), TrackObservation(2, 0, sliver), TrackObservation(3, 0, other)]
+        assert grader.on_tracks(i / FPS, observed) == []
+    (lost,) = grader.on_tracks(5 / FPS, [TrackObservation(1, 0, shapes[5])], ended_ids=[2, 3])
+    assert lost.fillet_id == 3 and lost.label == "unscored" and lost.shape.reason == REASON_LOST_BEFORE_EDGE
+    assert grader.fragments == 1
 
 
 def test_a_track_seen_only_twice_then_lost_gives_no_verdict():

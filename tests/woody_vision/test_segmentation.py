@@ -424,3 +424,36 @@ def test_a_wide_fillet_reading_thicker_over_the_roller_crown_is_not_split_along_
     assert cv2.boundingRect((height > 0).astype(np.uint8))[2] > params.split_width_px, "precondition: wide"
     (blob,) = segment_height_map(height, params)
     assert blob.area_px > 0.95 * np.count_nonzero(inside)
+
+
+def rectangle(u0: int, v0: int, width: int, rows: int) -> np.ndarray:
+    """The outline (image coordinates) of a width x rows rectangle from column u0, row v0."""
+    return np.array([[u0, v0], [u0 + width - 1, v0], [u0 + width - 1, v0 + rows - 1], [u0, v0 + rows - 1]], np.int32)
+
+
+def test_a_blob_holding_two_tracked_fillets_is_split_where_their_priors_lie():
+    """Two fillets side by side with nothing to part them (a solid block: no neck, one height) are one blob; the
+    tracker's priors of both split it into the two, each on its own side."""
+    mask = np.zeros((200, 300), np.uint8)
+    left, right = rectangle(100, 50, 40, 100), rectangle(140, 50, 40, 100)
+    cv2.fillPoly(mask, [left, right], 255)
+    height = np.full(mask.shape, 0.02, np.float32)
+    assert len(segment_mask(mask, height, SegmentationParams())) == 1
+    moved = [left + [0, 4], right + [2, -3]]  # predictions a few pixels off
+    split = segment_mask(mask, height, SegmentationParams(), moved)
+    assert len(split) == 2
+    by_column = sorted(split, key=lambda b: b.centroid[0])
+    assert abs(by_column[0].centroid[0] - 119.5) < 3 and abs(by_column[1].centroid[0] - 159.5) < 3
+    assert abs(by_column[0].area_px - 4000) < 300 and abs(by_column[1].area_px - 4000) < 300
+
+
+def test_a_slivers_prior_or_two_priors_of_one_fillet_never_split_it():
+    mask = np.zeros((200, 300), np.uint8)
+    whole = rectangle(100, 50, 60, 100)
+    cv2.fillPoly(mask, [whole], 255)
+    height = np.full(mask.shape, 0.02, np.float32)
+    sliver = rectangle(140, 60, 15, 25)
+    assert len(segment_mask(mask, height, SegmentationParams(), [whole, sliver])) == 1
+    halves = [rectangle(100, 50, 30, 100), rectangle(130, 50, 30, 100)]  # no growth past the larger: one fillet
+    assert len(segment_mask(mask, height, SegmentationParams(), [whole, *halves])) == 1
+    assert len(segment_mask(mask, height, SegmentationParams(), [rectangle(10, 10, 20, 20)] * 2)) == 1

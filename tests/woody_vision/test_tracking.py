@@ -253,3 +253,13 @@ def test_a_fillet_merged_with_the_one_hanging_ahead_for_a_frame_keeps_its_track_
     tracker.update([square_blob(386, 254, half=30), square_blob(368, 263, half=8)], 6 / FPS)
     update = tracker.update([square_blob(384, 250)], 7 / FPS)
     assert [t.track_id for t in update.active if t.unseen == 0] == [fillet]
+
+
+def test_predicted_outlines_are_the_seen_established_tracks_moved_by_their_motion():
+    tracker = CentroidTracker()
+    for i in range(3):
+        tracker.update([square_blob(100.0, 50.0 + 10.0 * i), square_blob(300.0, 20.0)], i / FPS)
+    tracker.update([square_blob(100.0, 80.0)], 3 / FPS)  # the second fillet goes unseen
+    (outline,) = tracker.predicted_outlines(5 / FPS)  # two frames on, at 10 px per frame
+    assert np.array_equal(outline, square_blob(100.0, 100.0).contour)
+    assert CentroidTracker().predicted_outlines(0.0) == []

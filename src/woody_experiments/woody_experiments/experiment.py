@@ -321,7 +321,8 @@ class _TopView:
             return None
         noisy, color = self._sense(rgb, depth)
         used = color if self.segmentation.color_threshold else None
-        blobs = segment_depth(noisy, self.background.depth, self.segmentation, used, self.background.color)
+        blobs = segment_depth(noisy, self.background.depth, self.segmentation, used, self.background.color,
+                              self.tracker.predicted_outlines(now))
         update = self.tracker.update(blobs, now)
         observations = [TrackObservation(t.track_id, t.lane, belt_outline(t.blob.contour, noisy, self.k, self.height),
                                          t.unseen, t.blob.contour) for t in update.active]

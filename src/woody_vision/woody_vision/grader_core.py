@@ -31,6 +31,7 @@ from woody_common.calibration import resolved_calibration
 from woody_vision.grading import LABEL_UNSCORED, FilletConditions, FittedRange, GradingRules
 from woody_vision.shape_score import (
     LEADING_BLUNT,
+    REASON_LOST_BEFORE_EDGE,
     REASON_STARTED_PAST_EDGE,
     STATUS_SCORED,
     STATUS_UNSCORED,
@@ -132,6 +133,9 @@ PIECE_AREA_RATIO = 0.5
 """A track first seen past the edge is a split-off piece of its lane's fillet when its blob is smaller than this
 fraction of that fillet's flat outline (:meth:`FilletGrader._is_piece`)."""
 
+PIECE_REASONS = (REASON_STARTED_PAST_EDGE, REASON_LOST_BEFORE_EDGE)
+"""The unscored results :meth:`FilletGrader._is_piece` checks: a track only a piece of a fillet ends so."""
+
 MIN_SIGHTINGS = 3
 """Frames a track must be seen in before its end gives a verdict."""
 
@@ -217,7 +221,7 @@ class FilletGrader:
             if result is not None and evaluator.sightings < MIN_SIGHTINGS:
                 self.tentative += 1  # seen once or twice, then lost: a track the grader cannot stand behind
             elif result is not None:
-                decided += self._decide(track_id, result)
+                decided += self._decide(track_id, result, evaluator.flat_area)
             self._lanes.pop(track_id, None)
         return decided
 
@@ -258,7 +262,7 @@ class FilletGrader:
 
     def _decide(self, track_id: int, result: ShapeResult, area_px: float = 0.0) -> list[GradedFillet]:
         lane = self._lanes.get(track_id, -1)
-        if result.reason == REASON_STARTED_PAST_EDGE and self._is_piece(lane, track_id, area_px):
+        if result.reason in PIECE_REASONS and self._is_piece(lane, track_id, area_px):
             self.fragments += 1
             return []
         graded = self._classify(track_id, lane, result)
@@ -285,17 +289,19 @@ class FilletGrader:
                             conditions=conditions, threshold=decision.threshold)
 
     def _is_piece(self, lane: int, track_id: int, area_px: float) -> bool:
-        """Whether a track that first appears past the edge is a piece of a fillet already being graded.
+        """Whether a track that first appears past the edge, or ends before its body reaches it, is a piece of a
+        fillet of its lane being graded.
 
         A noisy camera's tip going over the edge splits off a small piece next
-        to a fillet of the same lane that was seen flat before the edge: it
-        gets no verdict, so the gate and the sweep hear only the whole fillet's.
-        A blob of at least PIECE_AREA_RATIO of that fillet's flat area is a
-        fillet of its own that was hidden in a neighbour's blob until the edge:
-        it gets its unscored verdict, so the gate diverts it.
+        to a fillet of the same lane that was seen flat before the edge, and a
+        crowded lane's split of two touching fillets can leave a sliver that
+        lives a few frames on the belt: neither gets a verdict, so the gate and
+        the sweep hear only the whole fillet's. A blob of at least
+        PIECE_AREA_RATIO of that fillet's flat area is a fillet of its own (hidden
+        in a neighbour's blob until the edge, or lost on the belt): it gets its
+        unscored verdict, so the gate diverts it.
         """
-        return any(self._lanes.get(other) == lane and evaluator.referenced
-                   and area_px < PIECE_AREA_RATIO * evaluator.reference_area
+        return any(self._lanes.get(other) == lane and area_px < PIECE_AREA_RATIO * evaluator.flat_area
                    for other, evaluator in self._evaluators.items() if other != track_id)
 
     def _match_side(self, closing: float) -> SideMeasurement | None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -199,11 +200,13 @@ def _height_map(depth: np.ndarray, background: np.ndarray) -> np.ndarray:
 def segment_depth(
     depth: np.ndarray, background: np.ndarray, params: SegmentationParams = SegmentationParams(),
     color: np.ndarray | None = None, color_background: np.ndarray | None = None,
+    priors: Sequence[np.ndarray] = (),
 ) -> list[Blob]:
     """Segment the fillets in a depth frame against a background depth.
 
     With ``params.color_threshold`` set and a registered colour frame and colour background given,
-    the outline near the depth mask comes from the colour (:func:`refine_with_color`)."""
+    the outline near the depth mask comes from the colour (:func:`refine_with_color`). ``priors`` are the
+    outlines where the tracked fillets should lie in this frame (:func:`_split_by_priors`)."""
     height = height_map(depth, background)
     if params.fill_invalid_px:
         with np.errstate(invalid="ignore"):
@@ -216,7 +219,7 @@ def segment_depth(
     mask = cv2.compare(height, params.height_threshold_m, cv2.CMP_GT) if height.size else None
     if mask is not None and params.color_threshold and color is not None and color_background is not None:
         mask = refine_with_color(mask, color, color_background, params)
-    return segment_mask(mask, height, params)
+    return segment_mask(mask, height, params, priors)
 
 
 def refine_with_color(depth_mask: np.ndarray, color: np.ndarray, color_background: np.ndarray,
@@ -260,8 +263,10 @@ def segment_height_map(height: np.ndarray, params: SegmentationParams = Segmenta
     return segment_mask(mask, height, params)
 
 
-def segment_mask(mask: np.ndarray | None, height: np.ndarray, params: SegmentationParams) -> list[Blob]:
-    """Split a fillet mask (uint8, 255 = fillet; None for a 0-pixel frame) into blobs with heights from ``height``."""
+def segment_mask(mask: np.ndarray | None, height: np.ndarray, params: SegmentationParams,
+                 priors: Sequence[np.ndarray] = ()) -> list[Blob]:
+    """Split a fillet mask (uint8, 255 = fillet; None for a 0-pixel frame) into blobs with heights from ``height``,
+    and blobs holding several of the ``priors`` (outlines where tracked fillets should lie) into those fillets."""
     if mask is None:  # a 0-pixel frame has no fillets (OpenCV would assert on it)
         return []
     # Fillets cover about a quarter of the frame's bounding box of fillet pixels, so the opening and the labelling
@@ -292,8 +297,9 @@ def segment_mask(mask: np.ndarray | None, height: np.ndarray, params: Segmentati
         component = _pad(cv2.compare(labels[y0:y1, x0:x1], label, cv2.CMP_EQ))
         origin = (cx0 + x0 - 1, cy0 + y0 - 1)
         height_roi = _pad(height[y0:y1, x0:x1])
-        for part, contour in _split_component(component, height_roi, params):
-            blob = _make_blob(part, contour, height_roi, origin, params.min_area_px)
+        parts = _split_component(component, height_roi, params)
+        for mask_roi, contour in (piece for part in parts for piece in _split_by_priors(part, priors, origin)):
+            blob = _make_blob(mask_roi, contour, height_roi, origin, params.min_area_px)
             if blob is not None:
                 blobs.append(blob)
     blobs.sort(key=lambda b: (b.centroid[1], b.centroid[0]))
@@ -360,6 +366,53 @@ def _split_by_height(component: np.ndarray, height: np.ndarray,
     return _region_masks(labels, big)
 
 
+def _split_by_priors(part: tuple[np.ndarray, np.ndarray | None], priors: Sequence[np.ndarray],
+                     origin: tuple[int, int]) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """The part, or the tracked fillets merged in it, each grown from where its prior outline lies.
+
+    Two fillets that touch where neither a neck nor their heights part them (side by side as they tip over the
+    roller, where the background falls to the floor) are one blob, and the tracker would follow one of them
+    through it and lose the other. The tracker knows where each should lie: a blob that holds PRIOR_OVERLAP of
+    two or more priors of a fillet's size and has grown past the largest (MERGE_AREA_RATIO) is split by a
+    distance watershed from the priors' own pixels. A sliver's prior (smaller than PRIOR_AREA_RATIO of the
+    largest) never splits a fillet, nor do two priors of one fillet, which leave no growth.
+    """
+    mask = part[0]
+    held = [prior for prior in priors if _held(mask, prior, origin)]
+    largest = max((cv2.contourArea(prior) for prior in held), default=0.0)
+    held = [prior for prior in held if cv2.contourArea(prior) >= PRIOR_AREA_RATIO * largest]
+    if len(held) < 2 or cv2.countNonZero(mask) < MERGE_AREA_RATIO * largest:
+        return [part]
+    markers = np.zeros(mask.shape, np.int32)
+    claims = np.zeros(mask.shape, np.uint8)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (PRIOR_ERODE_PX, PRIOR_ERODE_PX))
+    for label, prior in enumerate(held, start=1):
+        core = cv2.erode(cv2.bitwise_and(_filled(prior, origin, mask.shape), mask), kernel)
+        markers[core > 0] = label
+        claims += core > 0
+    markers[claims > 1] = 0
+    labels = _flood(cv2.distanceTransform(mask, cv2.DIST_L2, 5), markers, mask)
+    return _region_masks(labels, range(1, len(held) + 1))
+
+
+def _held(mask: np.ndarray, prior: np.ndarray, origin: tuple[int, int]) -> bool:
+    """Whether ``mask`` (an ROI at ``origin``) covers PRIOR_OVERLAP of the prior outline's area."""
+    area = cv2.contourArea(prior)
+    u, v, width, height = cv2.boundingRect(prior)
+    if area <= 0.0 or u + width <= origin[0] or v + height <= origin[1] or u >= origin[0] + mask.shape[1] \
+            or v >= origin[1] + mask.shape[0]:
+        return False
+    inside = cv2.countNonZero(cv2.bitwise_and(_filled(prior, origin, mask.shape), mask))
+    return inside >= PRIOR_OVERLAP * area
+
+
+def _filled(outline: np.ndarray, origin: tuple[int, int], shape: tuple[int, ...]) -> np.ndarray:
+    """The outline (image coordinates) filled into an ROI of ``shape`` at ``origin``."""
+    filled = np.zeros(shape, np.uint8)
+    cv2.fillPoly(filled, [np.asarray(outline, np.int32).reshape(-1, 2) - np.array(origin, np.int32)], 255)
+    return filled
+
+
 def _side_by_side(core: np.ndarray, other: np.ndarray) -> bool:
     """Whether two cores (connected-component stats rows) lie beside each other across the flow, sharing at least
     ``SIDE_BY_SIDE_OVERLAP`` of the shorter one's rows. A thick part ahead of or behind a core is the same fillet
@@ -375,6 +428,14 @@ def _region_masks(labels: np.ndarray, regions) -> list[tuple[np.ndarray, None]]:
     return [(np.where(labels == region, np.uint8(255), np.uint8(0)), None) for region in regions]
 
 
+PRIOR_OVERLAP = 0.5
+"""A blob holds a tracked fillet's prior outline when it covers this fraction of the prior's area."""
+PRIOR_AREA_RATIO = 0.3
+"""Priors smaller than this fraction of the largest one a blob holds are slivers and split nothing."""
+MERGE_AREA_RATIO = 1.25
+"""A blob holding several priors is split only when it is this much larger than the largest of them."""
+PRIOR_ERODE_PX = 5
+"""The priors' pixels seed the split this far (kernel px) inside their outlines, off the contact."""
 SIDE_BY_SIDE_OVERLAP = 0.25
 """Two thick cores split a wide component only when they share this fraction of the shorter core's rows."""
 MAX_LYING_HEIGHT_M = 0.1

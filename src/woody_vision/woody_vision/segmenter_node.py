@@ -221,8 +221,10 @@ class Segmenter(Node):
                 self.checker.reject("no camera_info received yet on /top_camera/depth/camera_info; frame skipped")
             self.tracks_pub.publish(out)  # every depth frame is answered: a paced line_sim waits for it
             return
-        blobs = segment_depth(depth, self.background.depth, self.params, color, self.background.color)
-        update = self.tracker.update(blobs, stamp_to_seconds(msg.header.stamp))
+        stamp = stamp_to_seconds(msg.header.stamp)
+        blobs = segment_depth(depth, self.background.depth, self.params, color, self.background.color,
+                              self.tracker.predicted_outlines(stamp))
+        update = self.tracker.update(blobs, stamp)
         out.ended_ids = [t.track_id for t in update.ended]
         layout = self.tracker.lane_layout
         for track in update.active:

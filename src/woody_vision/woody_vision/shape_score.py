@@ -466,6 +466,14 @@ class ShapeEvaluator:
         return self._reference_area
 
     @property
+    def flat_area(self) -> float:
+        """Area (px²) of the fillet lying flat: the reference's once locked, before that the median of the flat
+        frames seen so far (NaN before any)."""
+        if self.referenced or not self._flat:
+            return self._reference_area
+        return float(np.median([area for _, _, area, _ in self._flat]))
+
+    @property
     def referenced(self) -> bool:
         """True once the fillet was seen flat before the edge and its reference is locked."""
         return self._reference is not None

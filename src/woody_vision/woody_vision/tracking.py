@@ -87,6 +87,17 @@ def _belt_speed(tracks: Sequence[Track]) -> float:
     return float(np.median(moving)) if moving else 0.0
 
 
+def _motion(tracks: Sequence[Track], stamp: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each track's time since its last sighting (s) and its predicted motion (px/s, along the rows only; an
+    unseen track at least at the belt's speed, :func:`_belt_speed`)."""
+    elapsed = np.array([max(stamp - t.stamp, 0.0) for t in tracks])
+    velocity = np.array([t.velocity for t in tracks], dtype=float).reshape(-1, 2)
+    velocity[:, 0] = 0.0
+    unseen = np.array([t.unseen > 0 for t in tracks], dtype=bool)
+    velocity[unseen, 1] = np.maximum(velocity[unseen, 1], _belt_speed(tracks))
+    return elapsed, velocity
+
+
 class CentroidTracker:
     """Nearest-centroid multi-object tracker with stable integer ids."""
 
@@ -136,16 +147,23 @@ class CentroidTracker:
                 self._open(blob, stamp)
         return TrackUpdate(active=[self._tracks[i] for i in sorted(self._tracks)], ended=ended)
 
+    def predicted_outlines(self, stamp: float) -> list[np.ndarray]:
+        """Where the outline of each established track seen in the latest frame should lie in the frame taken at
+        ``stamp``: its last outline moved by its predicted motion. The segmentation splits a blob that holds
+        several of them into those fillets (woody_vision.segmentation.segment_mask)."""
+        tracks = [t for t in self._tracks.values() if t.unseen == 0 and t.age >= BELT_SPEED_MIN_AGE]
+        if not tracks:
+            return []
+        elapsed, velocity = _motion(tracks, stamp)
+        return [t.blob.contour + np.rint(v * e).astype(np.int32) for t, v, e in zip(tracks, velocity, elapsed)]
+
     def _associate(self, ids: list[int], blobs: Sequence[Blob], stamp: float) -> dict[int, int]:
         """Track id -> blob index for the minimum-distance assignment within the gate."""
         if not ids or not blobs:
             return {}
         tracks = [self._tracks[i] for i in ids]
-        elapsed = np.array([max(stamp - t.stamp, 0.0) for t in tracks])
-        velocity = np.array([t.velocity for t in tracks])
-        velocity[:, 0] = 0.0
+        elapsed, velocity = _motion(tracks, stamp)
         unseen = np.array([t.unseen > 0 for t in tracks])
-        velocity[unseen, 1] = np.maximum(velocity[unseen, 1], _belt_speed(tracks))
         predicted = np.array([t.blob.centroid for t in tracks]) + velocity * elapsed[:, None]
         centroids = np.array([b.centroid for b in blobs], dtype=float)
         distance = np.linalg.norm(predicted[:, None, :] - centroids[None, :, :], axis=2)

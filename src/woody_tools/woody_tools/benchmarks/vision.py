@@ -118,7 +118,7 @@ def run_stream(fillets_in_view: int, frames: int, seed: int = 7) -> dict:
         stamp = i / FRAME_RATE_HZ
         _, depth = render_near_view(scene, stamp)  # like a just-received message: fresh, not timed
         w0, t0 = time.perf_counter(), time.thread_time()
-        blobs = segment_depth(depth, bg, params)
+        blobs = segment_depth(depth, bg, params, priors=tracker.predicted_outlines(stamp))
         update = tracker.update(blobs, stamp)
         observations = [TrackObservation(t.track_id, t.lane, t.blob.contour, t.unseen) for t in update.active]
         decided = grader.on_tracks(stamp, observations, [t.track_id for t in update.ended])
