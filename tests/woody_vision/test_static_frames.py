@@ -9,6 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from woody_common import topics
+from woody_common.line import MAX_CAMERA_TILT_DEG
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_sim_node import static_transforms
 from woody_vision.static_frames import STRAIGHT_DOWN, StaticFrames, camera_mount, mount_problem
@@ -21,7 +22,7 @@ def test_line_sims_frames_give_its_camera_height_and_edge_offset():
     mount = camera_mount(frames.lookup(topics.WORLD_FRAME, topics.TOP_FRAME))
     assert mount.height_m == pytest.approx(geometry.top_height)
     assert mount.edge_offset_m == pytest.approx(-geometry.top_center_x)
-    assert mount.off_straight_down_deg == pytest.approx(0.0, abs=1e-6) and mount_problem(mount) == ""
+    assert mount.tilt_deg == pytest.approx(0.0, abs=1e-6) and mount_problem(mount) == ""
 
 
 def test_a_chain_through_a_drivers_frames_composes():
@@ -41,12 +42,16 @@ def test_a_chain_through_a_drivers_frames_composes():
     assert frames.lookup("world", "another_camera_frame") is None
 
 
-def test_a_tilted_camera_or_one_below_the_belt_is_refused_in_one_line():
-    tilted = Rotation.from_euler("y", 5, degrees=True).as_matrix() @ STRAIGHT_DOWN
+def test_a_camera_leaning_past_the_limit_or_below_the_belt_is_refused_in_one_line():
+    """A few degrees of tilt, roll or any yaw is a mount the belt view takes; a camera leaning further than
+    MAX_CAMERA_TILT_DEG, or one below the belt, is not."""
     frames = StaticFrames()
-    frames.add("world", "cam", (0.0, 0.0, 0.7), Rotation.from_matrix(tilted).as_quat())
-    mount = camera_mount(frames.lookup("world", "cam"))
-    assert math.isclose(mount.off_straight_down_deg, 5.0, abs_tol=1e-6)
-    assert "turned 5.0 deg from straight down" in mount_problem(mount)
+    for tilt, ok in ((5.0, True), (MAX_CAMERA_TILT_DEG + 1.0, False)):
+        leaning = Rotation.from_euler("zyx", [30.0, tilt, 0.0], degrees=True).as_matrix() @ STRAIGHT_DOWN
+        frames.add("world", "cam", (0.0, 0.0, 0.7), Rotation.from_matrix(leaning).as_quat())
+        mount = camera_mount(frames.lookup("world", "cam"))
+        assert math.isclose(mount.tilt_deg, tilt, abs_tol=1e-6)
+        assert (mount_problem(mount) == "") == ok
+        assert ok or f"looks {tilt:.1f} deg from straight down" in mount_problem(mount)
     frames.add("world", "cam", (0.0, 0.0, -0.1), Rotation.from_matrix(STRAIGHT_DOWN).as_quat())
     assert "not above it" in mount_problem(camera_mount(frames.lookup("world", "cam")))

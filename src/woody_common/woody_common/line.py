@@ -55,6 +55,13 @@ TOP_CAMERA_HEIGHT_M = 0.75
 """Default top camera: nadir, this high above the belt."""
 TOP_EDGE_OFFSET_M = 0.20
 """Its optical axis sits this far upstream of the roller edge."""
+STRAIGHT_DOWN_AXES = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, -1.0))
+"""A top camera looking straight down with image rows downstream: its optical axes (the matrix's columns) in the
+belt frame (REP 103 world: x downstream, y to lane 0, z up). Optical x = world +y, y = world +x, z = world -z."""
+MAX_CAMERA_TILT_DEG = 20.0
+"""The most a top camera may lean from straight down: further, the parallax of a fillet's height grows past a few
+pixels and the far side of the belt falls off the sharp part of the image (the twin refuses to render it, the
+vision to take it)."""
 
 SIDE_AXLE_PX = (480.0, 348.0)
 """(u, v) of the roller axle in the 960 x 696 side image (the image is centred on the axle)."""

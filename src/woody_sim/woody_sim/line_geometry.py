@@ -23,17 +23,21 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from woody_common.line import (
     BELT_MARGIN_M,
     LANE_PITCH_M,
     LANES,
+    MAX_CAMERA_TILT_DEG,
     MAX_LANES,
     ROLLER_RADIUS_M,
+    STRAIGHT_DOWN_AXES,
     TOP_CAMERA_HEIGHT_M,
     TOP_EDGE_OFFSET_M,
     watched_lane,
 )
+from woody_sim.camera_description import is_camera_file, load_camera
 
 TOP_CAMERA_PRESETS: dict[str, dict[str, float | int]] = {
     "default": {},
@@ -46,10 +50,14 @@ TOP_CAMERA_PRESETS: dict[str, dict[str, float | int]] = {
 """Named top-camera geometries: LineGeometry top_* field overrides."""
 
 
-def top_camera_preset(name: str) -> dict[str, float | int]:
-    """The LineGeometry field overrides of a named top camera; ValueError names the known presets."""
+def top_camera_preset(name: str) -> dict:
+    """The LineGeometry field overrides of a named top camera or of a camera description file (``*.yaml``,
+    woody_sim.camera_description); ValueError names the known presets or what is wrong with the file."""
+    if is_camera_file(name):
+        return load_camera(name).geometry_overrides()
     if name not in TOP_CAMERA_PRESETS:
-        raise ValueError(f"unknown top camera preset {name!r}; known: {', '.join(TOP_CAMERA_PRESETS)}")
+        raise ValueError(f"unknown top camera preset {name!r}; known: {', '.join(TOP_CAMERA_PRESETS)}, or a camera "
+                         "description file (*.yaml)")
     return dict(TOP_CAMERA_PRESETS[name])
 
 
@@ -69,6 +77,8 @@ class PinholeCamera:
     """3x3 matrix whose columns are the optical x, y, z axes in world coordinates."""
     near: float = 0.05
     far: float = 3.0
+    distortion: tuple[float, ...] = ()
+    """Lens distortion, OpenCV's order (k1, k2, p1, p2[, k3[, k4, k5, k6]]); empty: none."""
 
     @property
     def k(self) -> np.ndarray:
@@ -109,6 +119,17 @@ class LineGeometry:
     top_width: int = 672
     top_height_px: int = 376
     top_hfov: float = math.radians(85.0)
+    top_intrinsics: tuple[float, float, float, float] | None = None
+    """(fx, fy, cx, cy) in pixels; None: square pixels from ``top_hfov``, principal point in the image centre."""
+    top_distortion: tuple[float, ...] = ()
+    top_center_y: float = 0.0
+    """The top camera's optical centre across the belt (world y, towards lane 0)."""
+    top_tilt: float = 0.0
+    """The top camera's optical axis leaning downstream (rad, about world -y)."""
+    top_roll: float = 0.0
+    """The top camera's optical axis leaning towards lane 0 (rad, about world x)."""
+    top_yaw: float = 0.0
+    """The top camera's image rows turned from downstream towards lane 0 (rad, about world z)."""
 
     side_distance: float = 50.0
     """The seed's side camera is orthographic; ours is a telephoto this far away (m), whose scale varies by
@@ -155,17 +176,21 @@ class LineGeometry:
 
     def top_camera(self) -> PinholeCamera:
         fx = (self.top_width / 2.0) / math.tan(self.top_hfov / 2.0)
+        fx, fy, cx, cy = self.top_intrinsics or (fx, fx, self.top_width / 2.0, self.top_height_px / 2.0)
+        # turned about the vertical first, then leaned: tilt and roll are the optical axis's lean in the belt frame
+        turn = Rotation.from_euler("YXZ", [-self.top_tilt, self.top_roll, self.top_yaw]).as_matrix()
         return PinholeCamera(
             width=self.top_width,
             height=self.top_height_px,
             fx=fx,
-            fy=fx,
-            cx=self.top_width / 2.0,
-            cy=self.top_height_px / 2.0,
-            position=(self.top_center_x, 0.0, self.top_height),
-            rotation=((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, -1.0)),
+            fy=fy,
+            cx=cx,
+            cy=cy,
+            position=(self.top_center_x, self.top_center_y, self.top_height),
+            rotation=tuple(tuple(row) for row in (turn @ np.array(STRAIGHT_DOWN_AXES)).tolist()),
             near=0.05,
-            far=self.top_height - self.floor_z + 0.5,
+            far=(self.top_height - self.floor_z) / math.cos(math.radians(MAX_CAMERA_TILT_DEG)) + 0.5,
+            distortion=tuple(self.top_distortion),
         )
 
     def side_camera(self) -> PinholeCamera:
@@ -186,7 +211,8 @@ class LineGeometry:
         )
 
     def top_edge_row(self) -> float:
-        """Image row of the roller edge in the top camera (nadir view)."""
+        """Image row of the roller edge in the top camera's belt view (woody_vision.belt_view: the camera as if it
+        looked straight down from its height and place along the flow)."""
         cam = self.top_camera()
         return cam.cy + cam.fy * (0.0 - self.top_center_x) / self.top_height
 

@@ -58,6 +58,7 @@ from woody_common.ros_params import calibrated_defaults, check_overrides, declar
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
+from woody_sim.camera_description import is_camera_file, load_camera
 from woody_sim.frame_schedule import FrameSchedule
 from woody_sim.line_conditions import (
     MAX_LATERAL_M,
@@ -81,6 +82,8 @@ from woody_sim.spawn_schedule import SpawnSchedule
 from woody_sim.split_world import MAX_PHYSICS_WORKERS, SplitLineWorld
 
 SENSOR_STREAM = 11
+STAMP_STREAM = 13
+"""Second seed word of the colour stamps' jitter draws."""
 """Second seed word of the camera error model's random stream (the first is the node's ``seed``)."""
 HELD_WARN_S = 1.0
 """A line held this long (wall s) by what it waits for says so on /diagnostics."""
@@ -138,15 +141,13 @@ class LineSim(Node):
         workers = declare(self, "physics_workers", 1, "Worker processes that share the physics with this one, "
                           "each spawn going to the process with the fewest live fillets (0 = all physics in this "
                           "process; at most the core count).", 0, MAX_PHYSICS_WORKERS)
-        top_rate = declare(self, "top_rate_hz", 30.0, "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
+        top_camera, top_rate = self._declare_top_camera()
         side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0,
                             MAX_SIDE_RATE_HZ)
         side_idle = declare(self, "side_idle_rate_hz", 2.0, "Side frame rate while no fillet of the watched lane "
                             "is in its view (frames just after one leaves go at side_rate_hz).", 0.1, 400.0)
         side_lane = declare(self, "side_lane", -1, "Lane the side camera watches (-1 = centre lane).", -1,
                             MAX_LANES - 1)
-        top_camera = declare(self, "top_camera", "default", "Top camera geometry preset: default (672x376 at "
-                             "0.75 m) or paper (the seed system's 960x696, 86.6 deg, 0.33 m).")
         self.realtime = declare(self, "realtime", False, "Pace the simulation to the wall clock.")
         self.duration = declare(self, "duration_s", 0.0, "Exit after this much sim time (0 = run until stopped).",
                                 0.0, 1e6)
@@ -155,9 +156,8 @@ class LineSim(Node):
                            "free); keeps a slower vision graph from losing frames and a slower disk from losing "
                            "messages.", 0.0, 10.0)
         self._declare_start_gate()
-        self.sensor = sensor_preset(declare(self, "sensor", "ideal", "Top RGB-D camera error model: ideal, stereo "
-                                            "or structured_light (docs/sensors.md)."))
         self.sensor_rng = np.random.default_rng([seed, SENSOR_STREAM])
+        self.stamp_rng = np.random.default_rng([seed, STAMP_STREAM])
         if not self.k_values or not all(0 <= k < float("inf") for k in self.k_values):
             raise ValueError(f"k_values must be a non-empty list of finite values >= 0, got {self.k_values}")
         if side_lane >= lanes:
@@ -167,6 +167,28 @@ class LineSim(Node):
             damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, segments=segments, workers=workers,
             top_rate=top_rate, side_rate=side_rate, side_idle=side_idle, side_lane=side_lane,
             top_camera=top_camera, max_lead=max_lead)
+
+    def _declare_top_camera(self) -> tuple[str, float]:
+        """The top camera (a preset or a description file) and its frame rate; its error model and colour stamps
+        become attributes. A file's frame rate, error model and stamp offsets are the defaults of theirs."""
+        top_camera = declare(self, "top_camera", "default", "Top camera: a preset, default (672x376 at 0.75 m) or "
+                             "paper (the seed system's 960x696, 86.6 deg, 0.33 m), or a camera description file "
+                             "(*.yaml: resolution, intrinsics, distortion, mount, timing; config/cameras/).")
+        described = load_camera(top_camera) if is_camera_file(top_camera) else None
+        top_rate = declare(self, "top_rate_hz", described.frame_rate_hz if described else 30.0,
+                           "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
+        self.sensor = sensor_preset(declare(self, "sensor", described.sensor if described else "ideal",
+                                            "Top RGB-D camera error model: ideal, stereo or structured_light "
+                                            "(docs/sensors.md)."))
+        self.color_offset_s = declare(self, "color_stamp_offset_s",
+                                      described.color_stamp_offset_s if described else 0.0,
+                                      "Colour frames' stamp minus their depth frame's (s), as a driver that does "
+                                      "not align them stamps them.", -1.0, 1.0)
+        self.color_jitter_s = declare(self, "color_stamp_jitter_s",
+                                      described.color_stamp_jitter_s if described else 0.0,
+                                      "Standard deviation of a random part of the colour stamps' offset (s).",
+                                      0.0, 0.1)
+        return top_camera, top_rate
 
     def _declare_start_gate(self) -> None:
         """What the line waits for before its first step: the graph that consumes it."""
@@ -391,6 +413,12 @@ class LineSim(Node):
         t = self.world.time if stamp is None else stamp
         return Header(frame_id=frame_id, stamp=seconds_to_stamp(t))
 
+    def _color_stamp(self, stamp: float) -> float:
+        """The colour frame's stamp for a depth frame stamped ``stamp`` (never before 0)."""
+        if not (self.color_offset_s or self.color_jitter_s):
+            return stamp
+        return max(0.0, stamp + self.color_offset_s + self.color_jitter_s * float(self.stamp_rng.standard_normal()))
+
     def _publish_clock(self) -> None:
         msg = Clock()
         msg.clock = self._header("").stamp
@@ -399,11 +427,14 @@ class LineSim(Node):
     def _publish_frames(self, frames, stamp: float) -> None:
         if frames.top_rgb is not None and not self.sensor.drop(self.sensor_rng):
             header = self._header(topics.TOP_FRAME, stamp)
+            color_header = self._header(topics.TOP_FRAME, self._color_stamp(stamp))
             depth = to_message_array(self.sensor.depth(frames.top_depth, self.sensor_rng), self.sensor.encoding)
-            self.color_pub.publish(image_message(self.sensor.color(frames.top_rgb, self.sensor_rng), "rgb8", header))
+            self.color_pub.publish(image_message(self.sensor.color(frames.top_rgb, self.sensor_rng), "rgb8",
+                                                 color_header))
             self.depth_pub.publish(image_message(depth, self.sensor.encoding, header))
-            self.top_info.header = header
+            self.top_info.header = color_header
             self.color_info_pub.publish(self.top_info)
+            self.top_info.header = header
             self.depth_info_pub.publish(self.top_info)
         if frames.side_rgb is not None:
             header = self._header(topics.SIDE_FRAME, stamp)

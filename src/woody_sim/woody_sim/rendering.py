@@ -45,10 +45,11 @@ import multiprocessing.connection as mpc
 import time
 import traceback
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import cv2
 import numpy as np
 
 from woody_sim.child_process import ChildProcess, parent_messages
@@ -114,19 +115,20 @@ _SIDE_BELT_THICKNESS = 0.006
 
 # --------------------------------------------------------------------------- helpers
 def camera_info_fields(camera: PinholeCamera) -> dict:
-    """Values for a ``sensor_msgs/CameraInfo`` of an ideal pinhole camera."""
+    """Values for a ``sensor_msgs/CameraInfo`` of a pinhole camera and its lens distortion."""
     k = [float(camera.fx), 0.0, float(camera.cx), 0.0, float(camera.fy), float(camera.cy), 0.0, 0.0, 1.0]
     p = [float(camera.fx), 0.0, float(camera.cx), 0.0, 0.0, float(camera.fy), float(camera.cy), 0.0, 0.0, 0.0, 1.0, 0.0]
+    d = [float(c) for c in camera.distortion] + [0.0] * (5 - len(camera.distortion))
     return {
         "width": int(camera.width),
         "height": int(camera.height),
-        "distortion_model": "plumb_bob",
-        "d": [0.0] * 5,
+        "distortion_model": "rational_polynomial" if len(d) == 8 else "plumb_bob",
+        "d": d,
         "k": k,
         "r": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
         "p": p,
         # Upper-case aliases (the brief's spelling).
-        "D": [0.0] * 5,
+        "D": list(d),
         "K": list(k),
         "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
         "P": list(p),
@@ -236,6 +238,12 @@ class _View:
     """One camera: intrinsics, pose, static background."""
 
     def __init__(self, camera: PinholeCamera, bg_rgb: np.ndarray, bg_depth: np.ndarray | None) -> None:
+        self.shape = (int(camera.height), int(camera.width))
+        """The images' (rows, columns) as the camera delivers them."""
+        self.lens: tuple[np.ndarray, np.ndarray] | None = None
+        """(rows, columns) of the undistorted canvas each pixel of the camera's image shows; None: no distortion."""
+        if any(camera.distortion):
+            camera, self.lens = _undistorted_canvas(camera)
         self.camera = camera
         self.w = int(camera.width)
         self.h = int(camera.height)
@@ -249,6 +257,11 @@ class _View:
         self.zbuffer = ZBuffer(self.w, self.h, (self.fx, self.fy, self.cx, self.cy), self.near, self.light_opt,
                                AMBIENT, DIFFUSE)
 
+    def distort(self, image: np.ndarray) -> np.ndarray:
+        """An image rendered on the undistorted canvas as the camera's lens shows it (the image itself without
+        distortion)."""
+        return image if self.lens is None else image[self.lens]
+
     def pixel_rays(self) -> np.ndarray:
         """(H, W, 3) world directions of the pixel-centre rays, scaled so optical z = 1."""
         u = np.arange(self.w, dtype=np.float64)
@@ -256,6 +269,24 @@ class _View:
         uu, vv = np.meshgrid(u, v)
         d_opt = np.stack([(uu - self.cx) / self.fx, (vv - self.cy) / self.fy, np.ones_like(uu)], axis=-1)
         return d_opt @ self.rot.T
+
+
+def _undistorted_canvas(camera: PinholeCamera) -> tuple[PinholeCamera, tuple[np.ndarray, np.ndarray]]:
+    """An ideal pinhole camera (same pose and focal lengths) large enough to hold every ray the distorted camera
+    sees (a barrel lens's corners reach beyond its own ideal image), and for each pixel of the distorted image the
+    nearest canvas pixel seeing the same ray."""
+    u, v = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
+    k = camera.k
+    ideal = cv2.undistortPoints(np.stack([u, v], axis=-1).reshape(-1, 1, 2), k, np.asarray(camera.distortion),
+                                P=k).reshape(camera.height, camera.width, 2)
+    left, top = (max(0, int(np.ceil(-ideal[..., i].min()))) + 1 for i in (0, 1))
+    right = max(0, int(np.ceil(ideal[..., 0].max() - (camera.width - 1)))) + 1
+    bottom = max(0, int(np.ceil(ideal[..., 1].max() - (camera.height - 1)))) + 1
+    canvas = replace(camera, width=camera.width + left + right, height=camera.height + top + bottom,
+                     cx=camera.cx + left, cy=camera.cy + top, distortion=())
+    cols = np.clip(np.rint(ideal[..., 0]) + left, 0, canvas.width - 1).astype(np.intp)
+    rows = np.clip(np.rint(ideal[..., 1]) + top, 0, canvas.height - 1).astype(np.intp)
+    return canvas, (rows, cols)
 
 
 # --------------------------------------------------------------------------- backgrounds
@@ -401,8 +432,11 @@ class LineRenderer:
         view = self._top
         rgb = view.bg_rgb.copy()
         depth = view.bg_depth.copy()
-        self._draw(view, checked, lane=None, rgb=rgb, depth=depth, instances=instances)
-        return rgb, depth
+        drawn = instances if instances is None or view.lens is None else np.full(depth.shape, NO_FILLET, np.int64)
+        self._draw(view, checked, lane=None, rgb=rgb, depth=depth, instances=drawn)
+        if drawn is not instances:
+            instances[...] = view.distort(drawn)
+        return view.distort(rgb), view.distort(depth)
 
     def render_side(self, poses: Mapping[int, np.ndarray], instances: np.ndarray | None = None) -> np.ndarray:
         """Side camera: rgb uint8 (H, W, 3) of the watched lane (other lanes are not drawn); ``instances`` as for
@@ -418,7 +452,7 @@ class LineRenderer:
     def instance_image(self, top: bool = True) -> np.ndarray:
         """An empty instance image of the top (or side) camera: every pixel :data:`NO_FILLET`."""
         view = self._top if top else self._side
-        return np.full((view.h, view.w), NO_FILLET, np.int64)
+        return np.full(view.shape, NO_FILLET, np.int64)
 
     def render(self, poses: Mapping[int, np.ndarray], want_top: bool = True, want_side: bool = True) -> Frames:
         top = self.render_top(poses) if want_top else (None, None)

@@ -13,7 +13,7 @@ from tf2_msgs.msg import TFMessage
 
 from woody_common import topics
 from woody_common.ros_params import declare
-from woody_vision.static_frames import CameraMount, StaticFrames, camera_mount, mount_problem
+from woody_vision.static_frames import CameraMount, Pose, StaticFrames, camera_mount, mount_problem
 
 TF_STATIC_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -40,19 +40,23 @@ class MountWatch:
         self.frames.add_message(msg)
         self.heard = True
 
-    def mount(self, camera_frame: str) -> CameraMount | None:
-        """The camera's mount, or None (no transforms joining the frames, or a mount the vision cannot take, said
-        once in the log)."""
+    def pose(self, camera_frame: str) -> Pose | None:
+        """The camera's optical frame in the belt frame, or None (no transforms joining the frames, or a mount the
+        vision cannot take, said once in the log)."""
         pose = self.frames.lookup(self.belt_frame, camera_frame) if self.belt_frame and camera_frame else None
         if pose is None:
             return None
-        mount = camera_mount(pose)
-        problem = mount_problem(mount)
+        problem = mount_problem(camera_mount(pose))
         if problem and camera_frame not in self._refused:
             self._refused.add(camera_frame)
             self.node.get_logger().error(f"tf_static {self.belt_frame} -> {camera_frame}: {problem}; camera height "
                                          "and roller edge offset from the parameters")
-        return None if problem else mount
+        return None if problem else pose
+
+    def mount(self, camera_frame: str) -> CameraMount | None:
+        """The camera's mount, or None (as :meth:`pose`)."""
+        pose = self.pose(camera_frame)
+        return None if pose is None else camera_mount(pose)
 
     def geometry(self, camera_frame: str, height_m: float, edge_offset_m: float) -> tuple[float, float, str | None]:
         """(camera height m, roller edge offset m, the transform they came from): the mount's, else the given

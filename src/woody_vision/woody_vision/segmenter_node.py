@@ -43,6 +43,7 @@ from woody_common.ros_params import declare, run_node
 from woody_common.stamps import stamp_to_nanoseconds, stamp_to_seconds
 from woody_msgs.msg import FilletTrack, FilletTrackArray, FilletVerdict
 from woody_vision import segmentation
+from woody_vision.belt_view import BeltView, CameraModel, straight_down_pose
 from woody_vision.camera_model import LaneLayout, belt_outline
 from woody_vision.frame_checks import FrameChecker, FrameError, SimTimeWatch, watch_clock
 from woody_vision.frame_pairing import FramePairing, Pair
@@ -95,6 +96,8 @@ class Segmenter(Node):
         self.background = BackgroundModel(frames)
         self.tracker_options = dict(max_distance_px=max_distance, max_unseen=max_unseen)
         self.tracker: CentroidTracker | None = None
+        self.belt_view: BeltView | None = None
+        """The camera's frames as the vision works on them (woody_vision.belt_view), once camera_info is known."""
         self.mount_watch = MountWatch(self)
         self.mount_from_tf = False
         self.checker = FrameChecker(self.get_logger())
@@ -140,10 +143,18 @@ class Segmenter(Node):
     def on_camera_info(self, info: CameraInfo) -> None:
         if info.k[0] <= 0 or (self.tracker is not None and self.mount_from_tf):
             return
-        height, _, source = self.mount_watch.geometry(info.header.frame_id, self.camera_height, 0.0)
-        if self.tracker is not None and source is None:
+        pose = self.mount_watch.pose(info.header.frame_id)
+        if self.tracker is not None and pose is None:
             return
-        self.mount_from_tf = source is not None
+        self.mount_from_tf = pose is not None
+        source = f"tf_static {self.mount_watch.belt_frame} -> {info.header.frame_id}" if pose is not None else None
+        try:
+            self.belt_view = BeltView(CameraModel.of(info), pose or straight_down_pose(self.camera_height))
+        except ValueError as exc:
+            self.get_logger().error(f"camera_info {info.header.frame_id}: {exc}; no frame is segmented",
+                                    throttle_duration_sec=30.0)
+            return
+        height = self.belt_view.height_m
         layout = LaneLayout(tuple(info.k), height, self.lanes, self.lane_pitch)
         self.params = dataclasses.replace(self.params, split_width_px=self.max_fillet_width * info.k[0] / height)
         if self.tracker is None:
@@ -151,8 +162,9 @@ class Segmenter(Node):
         else:  # tf_static came after the first camera_info: its mount from now on
             self.tracker.lane_layout = layout
         self.info_size = (info.width, info.height)
+        view = "as it is" if self.belt_view.identity else "resampled into the belt view (woody_vision.belt_view)"
         self.get_logger().info(f"calibration received: fx={info.k[0]:.1f}, {info.width}x{info.height}; camera "
-                               f"height {height:.3f} m from {source or 'the parameters'}")
+                               f"height {height:.3f} m from {source or 'the parameters'}; frames used {view}")
 
     def on_reset(self, _msg: Empty) -> None:
         self.background.reset()
@@ -210,6 +222,8 @@ class Segmenter(Node):
         """Segment and track one depth frame (with its colour frame, when the outline comes from colour)."""
         msg, depth = pair.depth
         color = self._color_of(pair, depth.shape)
+        if self.belt_view is not None:
+            depth, color = self.belt_view.depth(depth), self.belt_view.color(color)
         out = FilletTrackArray(header=msg.header, image_width=msg.width, image_height=msg.height)
         if self.pairing is not None and color is None:
             self.tracks_pub.publish(out)  # answered (a paced line_sim waits for it), but nothing tracked
@@ -271,7 +285,8 @@ class Segmenter(Node):
         if color is None or (paired is None and color.header.stamp != depth_msg.header.stamp):
             return blank
         try:
-            return match_size(color_rgb(color), depth_msg.height, depth_msg.width).copy()
+            canvas = match_size(color_rgb(color), depth_msg.height, depth_msg.width)
+            return (self.belt_view.color(canvas) if self.belt_view is not None else canvas).copy()
         except FrameError as exc:
             self.checker.reject(f"debug image: {exc}")
             return blank

@@ -4,9 +4,10 @@ A line publishes its fixed frames on ``tf_static`` (``line_sim`` does; on a real
 its own frames and a ``static_transform_publisher`` places the camera in the belt frame). The belt frame (REP
 103, ``world`` on woody's line) has x downstream along the flow, z up and its origin on the belt surface at the
 roller edge. From the chain of static transforms between it and the camera's optical frame (the images'
-``frame_id``) the vision takes the camera height and the edge offset instead of its parameters. The vision
-assumes a camera looking straight down with image rows running downstream; a mount further than
-``MOUNT_TOLERANCE_DEG`` from that is refused, in one line, and the parameters are kept.
+``frame_id``) the vision takes the camera's pose: the segmenter turns the frames of a camera mounted off straight
+down, turned or beside the belt's middle into its belt view (woody_vision.belt_view), and both nodes take the camera
+height and the edge offset instead of their parameters. A mount leaning further than MAX_CAMERA_TILT_DEG from
+straight down is refused, in one line, and the parameters are kept.
 
 No tf2 wheel exists on PyPI, so the few lines of tf2 this needs are here: a tree of static transforms, and the
 composition of the transforms along the path between two of its frames.
@@ -20,9 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-STRAIGHT_DOWN = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+from woody_common.line import MAX_CAMERA_TILT_DEG, STRAIGHT_DOWN_AXES
+
+STRAIGHT_DOWN = np.array(STRAIGHT_DOWN_AXES)
 """The optical axes (columns) in the belt frame of a camera looking straight down, image rows downstream."""
-MOUNT_TOLERANCE_DEG = 1.0
 
 
 @dataclass(frozen=True)
@@ -48,8 +50,8 @@ class CameraMount:
     """The optical centre above the belt surface."""
     edge_offset_m: float
     """The roller edge's distance downstream of the optical centre along the flow."""
-    off_straight_down_deg: float
-    """The rotation between the camera's axes and a straight-down mount with rows downstream."""
+    tilt_deg: float
+    """The angle between the optical axis and straight down."""
 
 
 class StaticFrames:
@@ -87,18 +89,22 @@ class StaticFrames:
         return target_pose.inverse().then(source_pose)
 
 
+def tilt_deg(pose: Pose) -> float:
+    """The angle between a camera's optical axis (at ``pose`` in the belt frame) and straight down."""
+    return math.degrees(math.acos(float(np.clip(-pose.rotation[2, 2], -1.0, 1.0))))
+
+
 def camera_mount(pose: Pose) -> CameraMount:
     """The mount of a camera whose optical frame has ``pose`` in the belt frame."""
-    turn = Rotation.from_matrix(STRAIGHT_DOWN.T @ pose.rotation).magnitude()
     x, _, z = pose.translation
-    return CameraMount(float(z), float(-x), math.degrees(turn))
+    return CameraMount(float(z), float(-x), tilt_deg(pose))
 
 
 def mount_problem(mount: CameraMount) -> str:
     """Why the vision cannot use this mount ('' when it can)."""
     if mount.height_m <= 0.0:
         return f"the camera is {mount.height_m:.3f} m above the belt, not above it"
-    if mount.off_straight_down_deg > MOUNT_TOLERANCE_DEG:
-        return (f"the camera is turned {mount.off_straight_down_deg:.1f} deg from straight down with image rows "
-                f"downstream (the vision takes at most {MOUNT_TOLERANCE_DEG:g} deg)")
+    if mount.tilt_deg > MAX_CAMERA_TILT_DEG:
+        return (f"the camera looks {mount.tilt_deg:.1f} deg from straight down (the vision takes at most "
+                f"{MAX_CAMERA_TILT_DEG:g} deg)")
     return ""

@@ -12,6 +12,7 @@ import argparse
 import math
 import re
 import sys
+from pathlib import Path
 
 from woody_common.calibration import ENV_VAR, resolve_calibration, resolved_calibration
 from woody_common.line import (
@@ -30,8 +31,9 @@ from woody_common.line import (
     fpm_to_mps,
     max_fillets_per_minute,
 )
+from woody_sim.camera_description import is_camera_file, load_camera
 from woody_sim.line_conditions import LINE_PRESETS, MAX_LATERAL_M, MAX_YAW_DEG, SCALE_RANGE, LineConditions
-from woody_sim.line_geometry import TOP_CAMERA_PRESETS
+from woody_sim.line_geometry import TOP_CAMERA_PRESETS, top_camera_preset
 from woody_sim.meshes import MAX_YAW_SD_DEG
 from woody_sim.sensor_model import PRESETS
 from woody_tools import arguments, line_run
@@ -70,15 +72,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="output folder (default bags/run-<time>)")
     parser.add_argument("--realtime", action="store_true", help="pace the simulation to the wall clock")
     parser.add_argument("--side-rate", type=float, default=60.0, help="side camera frame rate, Hz (default 60)")
-    parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
-                        help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
-                             "86.6 deg, 0.33 m)")
+    parser.add_argument("--top-camera", default="default", metavar="PRESET|FILE",
+                        help=f"top camera: a preset ({', '.join(sorted(TOP_CAMERA_PRESETS))}; default: 672x376, "
+                             "0.75 m; paper: the seed system's 960x696, 86.6 deg, 0.33 m) or a camera description "
+                             "file (config/cameras/*.yaml: resolution, intrinsics, distortion, mount, timing)")
     parser.add_argument("--calibration", default=None, metavar="FILE",
                         help="calibration file given to line_sim and the grader as a ROS params file "
                              f"(default ${ENV_VAR}, else the installed config/calibration.yaml)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
-    parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
-                        help="top camera error model (docs/sensors.md); default ideal")
+    parser.add_argument("--sensor", default=None, choices=sorted(PRESETS),
+                        help="top camera error model (docs/sensors.md); default: the camera file's, else ideal")
     parser.add_argument("--live", type=int, nargs="?", const=8765, default=None, metavar="PORT",
                         help="watch the line in Foxglove while it runs: serve it on ws://127.0.0.1:PORT (default "
                              "8765; the foxglove_view node, docs/foxglove.md)")
@@ -175,6 +178,21 @@ def _validate(args: argparse.Namespace) -> None:
     _validate_crowding(args)
     _validate_grading(args)
     _validate_calibration(args)
+    _validate_top_camera(args)
+
+
+def _validate_top_camera(args: argparse.Namespace) -> None:
+    """A top camera preset, or a description file made absolute for the nodes; ``--sensor`` not given becomes the
+    file's error model (else ideal)."""
+    try:
+        top_camera_preset(args.top_camera)
+    except ValueError as exc:
+        raise RunRefused(f"--top-camera: {exc}") from None
+    described = load_camera(args.top_camera) if is_camera_file(args.top_camera) else None
+    if described is not None:
+        args.top_camera = str(Path(args.top_camera).resolve())
+    if args.sensor is None:
+        args.sensor = described.sensor if described is not None else "ideal"
 
 
 def _validate_calibration(args: argparse.Namespace) -> None:
