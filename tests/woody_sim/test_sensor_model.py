@@ -88,6 +88,7 @@ def test_a_noisy_empty_belt_is_never_a_fillet(model):
 def test_published_encodings_and_bad_models():
     depth = np.array([[0.7504, np.nan]], np.float32)
     assert to_message_array(depth, "16UC1").tolist() == [[750, 0]]
+    assert to_message_array(depth, "16UC1", unit_m=0.0001).tolist() == [[7504, 0]]
     assert to_message_array(depth, "32FC1").dtype == np.float32
     with pytest.raises(ValueError, match="choose one of ideal, stereo, structured_light"):
         sensor_preset("lidar")

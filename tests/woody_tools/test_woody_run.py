@@ -62,6 +62,33 @@ def test_woody_run_leaves_bag_table_and_report(tmp_path):
     assert [[r[c] for c in verdict] for r in again] == [[r[c] for c in verdict] for r in rows]
 
 
+def test_a_plant_camera_is_rendered_as_its_file_describes_and_the_vision_grades_through_it(tmp_path):
+    """An Orbbec-class camera: tilted, rolled, turned, beside the belt's middle, with barrel distortion, colour
+    stamps 8 ms after depth and a structured-light error model. The bag carries its lens and pose; the segmenter
+    resamples its frames into the belt view and every fillet gets its right verdict."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    camera = Path(__file__).resolve().parents[2] / "config" / "cameras" / "orbbec-femto.yaml"
+    out = tmp_path / "run"
+    result = woody_run("--fillets", "6", "--k", "0", "100", "--seed", "5", "--top-camera", str(camera), "--out",
+                       str(out), timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    rows = list(csv.DictReader((out / "verdicts.csv").open()))
+    assert len(rows) == 6 and all(r["verdict"] == r["truth"] for r in rows), rows
+    assert "resampled into the belt view" in (out / "logs" / "segmenter.log").read_text()
+    with (out / "line.mcap").open("rb") as f:
+        messages = make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+            topics=["/top_camera/depth/camera_info", "/tf_static"])
+        first = {}
+        for _, channel, _, msg in messages:
+            first.setdefault(channel.topic, msg)
+    info, tf = first["/top_camera/depth/camera_info"], first["/tf_static"]
+    assert info.distortion_model == "rational_polynomial" and list(info.d)[0] == pytest.approx(0.45)
+    (top,) = [t for t in tf.transforms if t.child_frame_id == "top_camera_optical_frame"]
+    assert (top.transform.translation.y, top.transform.translation.z) == pytest.approx((-0.05, 0.70))
+
+
 def test_outside_the_calibrated_speeds_no_woody_fillet_is_graded_normal(tmp_path):
     out = tmp_path / "run"
     result = subprocess.run([entry_point("woody"), "run", "--fillets", "3", "--k", "100", "--speed-fpm", "400",
@@ -250,6 +277,8 @@ def test_a_run_on_an_exported_domain_with_other_nodes_refuses(tmp_path):
     (["--speed-change", "500@3"], "--speed-change: expected FPM@SECONDS with FPM in [1, 400]"),
     (["--score", "both"], "--score must be one of line|paper, got 'both'"),
     (["--threshold", "0"], "--threshold must be in [0.001, 1000], got 0"),
+    (["--top-camera", "wide"], "--top-camera: unknown top camera preset 'wide'"),
+    (["--top-camera", "/nonexistent/mine.yaml"], "--top-camera: camera file /nonexistent/mine.yaml: cannot read it"),
 ])
 def test_bad_line_options_are_refused_before_any_node_starts(tmp_path, args, message):
     result = woody_run("--fillets", "1", "--out", str(tmp_path / "run"), *args, timeout=60)
@@ -293,3 +322,12 @@ def test_defaults_keep_the_tidy_line_and_a_paper_threshold_goes_to_the_paper_rul
     assert "line_threshold" not in params["grader"]
     for speed in ("90", "140"):  # any speed of a real line
         assert _parameters("--speed-fpm", speed)["line_sim"]["line_speed_fpm"] == float(speed)
+
+
+def test_a_camera_file_sets_line_sims_camera_its_error_model_and_the_segmenters_depth_unit():
+    orbbec = Path(__file__).resolve().parents[2] / "config" / "cameras" / "orbbec-femto.yaml"
+    params = _parameters("--top-camera", str(orbbec))
+    assert params["line_sim"]["top_camera"] == str(orbbec) and params["line_sim"]["sensor"] == "structured_light"
+    assert params["segmenter"]["depth_unit_m"] == 0.001 and params["segmenter"]["camera_height_m"] == 0.7
+    assert params["segmenter"]["color_threshold"] > 0  # a real camera's filters
+    assert _parameters("--top-camera", str(orbbec), "--sensor", "ideal")["line_sim"]["sensor"] == "ideal"

@@ -28,6 +28,8 @@ def test_16uc1_depth_is_millimetres_with_zero_as_missing():
     assert np.isnan(out[0, 1])
     swapped = mm.byteswap()
     assert np.allclose(depth_metres(image_msg(swapped, "16UC1", bigendian=True)), out, equal_nan=True)
+    tenths = depth_metres(image_msg(mm, "16UC1"), unit_m=0.0001)  # a driver counting in 0.1 mm
+    assert tenths[0, 0] == pytest.approx(0.075) and np.isnan(tenths[0, 1])
 
 
 def test_depth_in_another_encoding_is_refused_with_one_line():

@@ -58,6 +58,9 @@ TOP_EDGE_OFFSET_M = 0.20
 STRAIGHT_DOWN_AXES = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, -1.0))
 """A top camera looking straight down with image rows downstream: its optical axes (the matrix's columns) in the
 belt frame (REP 103 world: x downstream, y to lane 0, z up). Optical x = world +y, y = world +x, z = world -z."""
+DEPTH_UNIT_M = 0.001
+"""What one step of a 16UC1 depth image is (REP 118: millimetres); a camera whose driver counts otherwise says so
+(line_sim's and the segmenter's ``depth_unit_m``)."""
 MAX_CAMERA_TILT_DEG = 20.0
 """The most a top camera may lean from straight down: further, the parallax of a fillet's height grows past a few
 pixels and the far side of the belt falls off the sharp part of the image (the twin refuses to render it, the

@@ -18,6 +18,8 @@ plausible mounts. A file reads (every key but ``width``, ``height`` and ``intrin
       yaw_deg: 1.5             # image rows turned from downstream towards lane 0
     frame_rate_hz: 30.0
     sensor: stereo             # error model: ideal, stereo, structured_light (woody_sim.sensor_model)
+    depth_encoding: 16UC1      # 32FC1 (metres) or 16UC1 (default: the error model's)
+    depth_unit_m: 0.001        # one 16UC1 step (REP 118: millimetres)
     color_stamp_offset_s: 0.0  # colour stamp minus depth stamp
     color_stamp_jitter_s: 0.0  # sd of a random part of it
 
@@ -33,12 +35,13 @@ from pathlib import Path
 
 import yaml
 
-from woody_common.line import MAX_CAMERA_TILT_DEG
+from woody_common.line import DEPTH_UNIT_M, MAX_CAMERA_TILT_DEG
 
 CAMERA_SUFFIXES = (".yaml", ".yml")
 SENSORS = ("ideal", "stereo", "structured_light")
-TOP_KEYS = {"width", "height", "intrinsics", "distortion", "mount", "frame_rate_hz", "sensor",
-            "color_stamp_offset_s", "color_stamp_jitter_s", "name"}
+DEPTH_ENCODINGS = ("32FC1", "16UC1")
+TOP_KEYS = {"width", "height", "intrinsics", "distortion", "mount", "frame_rate_hz", "sensor", "depth_encoding",
+            "depth_unit_m", "color_stamp_offset_s", "color_stamp_jitter_s", "name"}
 MOUNT_KEYS = {"height_m", "along_m", "across_m", "tilt_deg", "roll_deg", "yaw_deg"}
 
 
@@ -61,6 +64,9 @@ class CameraDescription:
     yaw_deg: float = 0.0
     frame_rate_hz: float = 30.0
     sensor: str = "ideal"
+    depth_encoding: str = ""
+    """32FC1 or 16UC1; '': the error model's."""
+    depth_unit_m: float = DEPTH_UNIT_M
     color_stamp_offset_s: float = 0.0
     color_stamp_jitter_s: float = 0.0
     name: str = ""
@@ -78,6 +84,9 @@ class CameraDescription:
             (abs(self.yaw_deg) <= 180.0, "mount yaw_deg must be within -180..180"),
             (1.0 <= self.frame_rate_hz <= 120.0, "frame_rate_hz must be within 1..120"),
             (self.sensor in SENSORS, f"sensor must be one of {', '.join(SENSORS)}"),
+            (self.depth_encoding in ("", *DEPTH_ENCODINGS), f"depth_encoding must be one of "
+                                                            f"{', '.join(DEPTH_ENCODINGS)}"),
+            (1e-5 <= self.depth_unit_m <= 0.01, "depth_unit_m must be within 0.00001..0.01 m"),
             (abs(self.color_stamp_offset_s) <= 1.0 and 0.0 <= self.color_stamp_jitter_s <= 0.1,
              "color_stamp_offset_s must be within -1..1 s and color_stamp_jitter_s within 0..0.1 s"),
         ]
@@ -129,5 +138,6 @@ def _description(data, stem: str) -> CameraDescription:
         distortion=tuple(float(v) for v in data.get("distortion") or ()),
         **{key: float(mount[key]) for key in MOUNT_KEYS if key in mount},
         frame_rate_hz=float(data.get("frame_rate_hz", 30.0)), sensor=str(data.get("sensor", "ideal")),
+        depth_encoding=str(data.get("depth_encoding", "")), depth_unit_m=float(data.get("depth_unit_m", DEPTH_UNIT_M)),
         color_stamp_offset_s=float(data.get("color_stamp_offset_s", 0.0)),
         color_stamp_jitter_s=float(data.get("color_stamp_jitter_s", 0.0)), name=str(data.get("name", stem)))

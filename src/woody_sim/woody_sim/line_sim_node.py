@@ -36,6 +36,7 @@ from woody_common.images import image_message
 from woody_common.line import (
     BELT_MARGIN_M,
     CLASS_K,
+    DEPTH_UNIT_M,
     LANE_PITCH_M,
     LANE_PITCH_RANGE_M,
     LANES,
@@ -76,7 +77,7 @@ from woody_sim.loop_phases import PhaseClock
 from woody_sim.meshes import MAX_YAW_SD_DEG, MeshError, checked_mesh_set, load_mesh
 from woody_sim.pacing import LeadLimiter
 from woody_sim.rendering import RenderProcess, camera_info_fields
-from woody_sim.sensor_model import sensor_preset, to_message_array
+from woody_sim.sensor_model import ENCODINGS, sensor_preset, to_message_array
 from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
 from woody_sim.split_world import MAX_PHYSICS_WORKERS, SplitLineWorld
@@ -180,6 +181,14 @@ class LineSim(Node):
         self.sensor = sensor_preset(declare(self, "sensor", described.sensor if described else "ideal",
                                             "Top RGB-D camera error model: ideal, stereo or structured_light "
                                             "(docs/sensors.md)."))
+        encoding = declare(self, "depth_encoding", (described.depth_encoding if described else "")
+                           or self.sensor.encoding, "Top depth image encoding: 32FC1 (metres) or 16UC1 (steps of "
+                           "depth_unit_m); default the error model's.")
+        if encoding not in ENCODINGS:
+            raise ValueError(f"depth_encoding must be one of {', '.join(ENCODINGS)}, got {encoding!r}")
+        self.depth_encoding = encoding
+        self.depth_unit_m = declare(self, "depth_unit_m", described.depth_unit_m if described else DEPTH_UNIT_M,
+                                    "One step of a 16UC1 depth image (m; REP 118: 0.001).", 1e-5, 0.01)
         self.color_offset_s = declare(self, "color_stamp_offset_s",
                                       described.color_stamp_offset_s if described else 0.0,
                                       "Colour frames' stamp minus their depth frame's (s), as a driver that does "
@@ -428,10 +437,11 @@ class LineSim(Node):
         if frames.top_rgb is not None and not self.sensor.drop(self.sensor_rng):
             header = self._header(topics.TOP_FRAME, stamp)
             color_header = self._header(topics.TOP_FRAME, self._color_stamp(stamp))
-            depth = to_message_array(self.sensor.depth(frames.top_depth, self.sensor_rng), self.sensor.encoding)
+            depth = to_message_array(self.sensor.depth(frames.top_depth, self.sensor_rng), self.depth_encoding,
+                                     self.depth_unit_m)
             self.color_pub.publish(image_message(self.sensor.color(frames.top_rgb, self.sensor_rng), "rgb8",
                                                  color_header))
-            self.depth_pub.publish(image_message(depth, self.sensor.encoding, header))
+            self.depth_pub.publish(image_message(depth, self.depth_encoding, header))
             self.top_info.header = color_header
             self.color_info_pub.publish(self.top_info)
             self.top_info.header = header

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from woody_common.line import DEPTH_UNIT_M
+
 ENCODINGS = ("32FC1", "16UC1")
 
 
@@ -155,9 +157,10 @@ def sensor_preset(name: str) -> SensorModel:
     return PRESETS[name]
 
 
-def to_message_array(depth: np.ndarray, encoding: str) -> np.ndarray:
-    """Depth in metres as a driver publishes it: 32FC1 metres with NaN holes, or 16UC1 millimetres with 0 holes."""
+def to_message_array(depth: np.ndarray, encoding: str, unit_m: float = DEPTH_UNIT_M) -> np.ndarray:
+    """Depth in metres as a driver publishes it: 32FC1 metres with NaN holes, or 16UC1 in steps of ``unit_m``
+    (millimetres by default, REP 118) with 0 holes."""
     if encoding == "32FC1":
         return np.ascontiguousarray(depth, dtype=np.float32)
-    mm = np.round(np.nan_to_num(depth, nan=0.0, posinf=0.0, neginf=0.0) * 1000.0)
-    return np.clip(mm, 0, 65535).astype(np.uint16)
+    steps = np.round(np.nan_to_num(depth, nan=0.0, posinf=0.0, neginf=0.0) / unit_m)
+    return np.clip(steps, 0, 65535).astype(np.uint16)

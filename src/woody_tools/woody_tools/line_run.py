@@ -52,6 +52,7 @@ from woody_experiments.run_report import (
     verdict_table,
     write_csv,
 )
+from woody_sim.camera_description import is_camera_file, load_camera
 from woody_sim.line_conditions import LineConditions, longest_placed_length
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_tools.cpu_usage import CpuAccounting
@@ -334,7 +335,9 @@ def node_parameters(args: argparse.Namespace, fillets: int | None, out: Path) ->
         "recorder": {"use_sim_time": True, "output": str(out / "line.mcap"),
                      "run_settings": json.dumps(run_settings(args, fillets)), **_recorded(args.namespace)},
         "segmenter": dict(vision_params, lane_pitch_m=args.lane_pitch_m,
-                          **({} if args.sensor == "ideal" else REAL_CAMERA_FILTERS)),
+                          **({} if args.sensor == "ideal" else REAL_CAMERA_FILTERS),
+                          **({"depth_unit_m": load_camera(args.top_camera).depth_unit_m}
+                             if is_camera_file(args.top_camera) else {})),
         "grader": _grader_params(args, vision_params),
         "reject_gate": {"use_sim_time": True, "lanes": args.lanes, "line_speed_fpm": args.speed_fpm,
                         "gate_distance_m": [args.gate_distance], "divert_unscored": True},

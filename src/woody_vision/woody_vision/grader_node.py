@@ -322,7 +322,7 @@ class Grader(Node):
     def close(self) -> None:
         pieces = self.core.fragments if self.core is not None else 0
         print(f"[grader] published {self.published} verdicts and {self.side_published} side results; {pieces} "
-              "tracks were pieces split off a fillet past the edge (no verdict)", flush=True)
+              "tracks were pieces split off a fillet (no verdict)", flush=True)
 
 
 def _finite_or_nan(value: float) -> float:

@@ -1,6 +1,6 @@
 """The image encodings a real RGB-D camera sends, converted to what the vision works on.
 
-Depth drivers publish ``32FC1`` in metres or ``16UC1`` in millimetres (REP 118);
+Depth drivers publish ``32FC1`` in metres or ``16UC1`` in millimetres (REP 118; another unit is a parameter);
 both become float32 metres with NaN wherever the camera has no measurement
 (NaN, ±inf, 0 or negative: stereo and structured-light cameras report a missing
 pixel as 0), so a hole is never mistaken for something rising off the belt.
@@ -14,21 +14,22 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from woody_common.line import DEPTH_UNIT_M
 from woody_vision.frame_checks import FrameError, image_to_array
 
 DEPTH_ENCODINGS = ("32FC1", "16UC1")
 """Depth encodings read: metres as float, millimetres as unsigned 16-bit."""
 COLOR_ENCODINGS = ("rgb8", "bgr8", "mono8")
 """Colour encodings read; every one becomes rgb8."""
-MM_TO_M = np.float32(0.001)
 ASPECT_TOLERANCE = 0.02
 """Colour and depth images whose aspect ratios differ by more than this are not registered to each other."""
 
 
-def depth_metres(msg) -> np.ndarray:
-    """Depth image as float32 metres (a new array), NaN where the camera measured nothing."""
+def depth_metres(msg, unit_m: float = DEPTH_UNIT_M) -> np.ndarray:
+    """Depth image as float32 metres (a new array), NaN where the camera measured nothing; a 16UC1 step is
+    ``unit_m``."""
     if msg.encoding == "16UC1":
-        depth = image_to_array(msg, "16UC1").astype(np.float32) * MM_TO_M
+        depth = image_to_array(msg, "16UC1").astype(np.float32) * np.float32(unit_m)
     elif msg.encoding == "32FC1":
         depth = np.array(image_to_array(msg, "32FC1"), dtype=np.float32)
     else:

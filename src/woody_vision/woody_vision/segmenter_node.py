@@ -1,6 +1,8 @@
 """segmenter: top-down depth frames in, tracked fillet contours out (/vision/tracks).
 
-Thin adapter over woody_vision.segmentation and woody_vision.tracking. The
+Thin adapter over woody_vision.belt_view, woody_vision.segmentation and woody_vision.tracking: a camera
+mounted off straight down, turned, off the belt's middle or with lens distortion (camera_info D, its pose
+on tf_static) has its frames resampled into its straight-down belt view first. The
 empty-belt background is learned from the first frames (publish on
 ~/reset_background to relearn it); every bad frame is skipped with one log
 line so a camera hiccup never takes the node down or corrupts its tracks.
@@ -32,6 +34,7 @@ from woody_common import topics
 from woody_common.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher, Health
 from woody_common.images import image_message
 from woody_common.line import (
+    DEPTH_UNIT_M,
     LANE_PITCH_M,
     LANE_PITCH_RANGE_M,
     LANES,
@@ -84,6 +87,8 @@ class Segmenter(Node):
         self.max_fillet_width = declare(self, "max_fillet_width_m", MAX_FILLET_WIDTH_M, "A blob wider across the "
                                         "flow than this is checked for two fillets side by side (m; 0 = off).",
                                         0.0, 2.0)
+        self.depth_unit = declare(self, "depth_unit_m", DEPTH_UNIT_M, "One step of a 16UC1 depth image (m; REP "
+                                  "118: 0.001, millimetres).", 1e-5, 0.01)
         self.camera_height = declare(self, "camera_height_m", TOP_CAMERA_HEIGHT_M,
                                      "Top camera height above the belt (m), part of its extrinsic calibration.",
                                      0.05, 10.0)
@@ -192,7 +197,7 @@ class Segmenter(Node):
         if self.sim_time.went_back("depth", stamp):
             self.restart(f"{topics.TOP_DEPTH_IMAGE} stamp went back to {stamp:.2f} s")
         try:
-            depth = depth_metres(msg)
+            depth = depth_metres(msg, self.depth_unit)
             self.checker.check(msg, depth.shape)
             self._check_calibration_size(msg)
         except FrameError as exc:
