@@ -22,13 +22,15 @@ reported too, so a near miss shows before it becomes a failure.
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from woody_common.line import PAPER_SPEEDS_FPM, fpm_to_mps
+from woody_sim.line_conditions import line_preset, place_mesh, placement_for
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import FilletMesh
@@ -131,3 +133,85 @@ def soak(meshes: list[FilletMesh], passages: int, seed: int = 0, config: Physics
             progress(count)
     result.wall_s = time.perf_counter() - wall0
     return result
+
+
+SHIFT_SPACING_M = 0.45
+"""In-lane spacing of the shift soak's line: the messy line's default (woody run)."""
+
+
+@dataclass
+class ShiftResult:
+    """A long messy line through one LineWorld: what its process held as it ran."""
+
+    fillets: int = 0
+    blowups: int = 0
+    sim_s: float = 0.0
+    wall_s: float = 0.0
+    rss_mb: list[tuple[int, float]] = field(default_factory=list)
+    """(fillets gone, this process's resident memory MB) at every sample."""
+
+
+def shift(meshes: list[FilletMesh], fillets: int, mass: float, lanes: int = 3, speed_fpm: float = 100.0,
+          seed: int = 0, samples: int = 20, config: PhysicsConfig | None = None,
+          progress: Callable[[int], None] | None = None) -> ShiftResult:
+    """Run ``fillets`` placed fillets of a messy line (each turned, sized and offset its own way, woody_sim.
+    line_conditions) through one LineWorld, as line_sim does for hours, sampling this process's resident memory
+    ``samples`` times as they leave; each placed mesh is released once its fillet is gone, as line_sim does."""
+    geometry = LineGeometry(lanes=lanes)
+    speed = fpm_to_mps(speed_fpm)
+    conditions = line_preset("messy")
+    result = ShiftResult()
+    placed: dict[int, FilletMesh] = {}
+    every = max(1, fillets // samples)
+    wall0, next_wave, spawned = time.perf_counter(), 0.0, 0
+    with LineWorld(geometry, config) as world:
+        while result.fillets < fillets:
+            if world.time >= next_wave and spawned < fillets:
+                spawned = _spawn_wave(world, meshes, (conditions, seed, mass), spawned, speed, placed)
+                next_wave += SHIFT_SPACING_M / speed
+            world.step()
+            for fillet_id in world.take_removed():
+                world.release(placed.pop(fillet_id))
+                result.fillets += 1
+                if result.fillets % every == 0:
+                    result.rss_mb.append((result.fillets, resident_mb()))
+                if progress is not None:
+                    progress(1)
+        result.blowups, result.sim_s = len(world.blown_up), world.time
+    result.wall_s = time.perf_counter() - wall0
+    return result
+
+
+def _spawn_wave(world: LineWorld, meshes: list[FilletMesh], line: tuple, spawned: int, speed: float,
+                placed: dict[int, FilletMesh]) -> int:
+    """One fillet per lane, each placed its own way (``line``: the conditions, seed and mass M); returns the
+    fillets spawned so far."""
+    conditions, seed, mass = line
+    for lane in range(world.geometry.lanes):
+        placement = placement_for(conditions, seed, spawned)
+        mesh = place_mesh(meshes[spawned % len(meshes)], placement)
+        k = SOAK_K[spawned % len(SOAK_K)]
+        fillet_id = world.spawn(mesh, k, lane, mass * placement.scale ** 3, speed,
+                                lateral_offset=placement.lateral_offset_m)
+        placed[fillet_id] = mesh
+        spawned += 1
+    return spawned
+
+
+def resident_mb() -> float:
+    """This process's resident memory (MB, Linux /proc; NaN elsewhere)."""
+    try:
+        with open("/proc/self/status") as status:
+            return next(int(line.split()[1]) / 1024.0 for line in status if line.startswith("VmRSS"))
+    except (OSError, StopIteration):
+        return math.nan
+
+
+def growth_mb_per_1000(samples: list[tuple[int, float]]) -> float:
+    """The least-squares slope of resident memory over the second half of the samples (MB per 1,000 fillets): the
+    first half holds the start-up (caches, the first worlds)."""
+    late = samples[len(samples) // 2:]
+    if len(late) < 2:
+        return math.nan
+    x, y = np.array(late, dtype=float).T
+    return float(np.polyfit(x, y, 1)[0] * 1000.0)

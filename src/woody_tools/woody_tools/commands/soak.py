@@ -18,8 +18,14 @@ import sys
 import time
 from pathlib import Path
 
+from woody_common.calibration import resolved_calibration
+from woody_common.line import MAX_LANES, REFERENCE_SPEED_FPM, fpm_to_mps
 from woody_experiments import soak
 from woody_experiments.mesh_sets import load_meshes
+from woody_sim.line_world import calibrated_config
+from woody_sim.soak import SHIFT_SPACING_M, growth_mb_per_1000, shift
+
+MAX_SHIFT_FILLETS = 1_000_000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,9 +36,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: cores)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the condition order (default 0)")
     parser.add_argument("--json", dest="json_path", default=None, help="also write the figures to this JSON file")
+    parser.add_argument("--shift", type=int, default=0, metavar="FILLETS",
+                        help="instead: a messy line of FILLETS placed fillets (each turned, sized and offset its own "
+                             "way) through one physics world, as line_sim runs for hours, printing the process's "
+                             "resident memory as they leave and its growth per 1,000 fillets")
+    parser.add_argument("--lanes", type=int, default=3, help="with --shift: lanes, 1-6 (default 3)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.shift:
+        return run_shift(args)
     from tqdm import tqdm
 
     if args.passages < 1 or args.jobs < 1:
@@ -64,3 +77,32 @@ def run(args: argparse.Namespace) -> int:
     if args.json_path:
         Path(args.json_path).write_text(json.dumps(summary, indent=2) + "\n")
     return 1 if summary["blowups"] else 0
+
+
+def run_shift(args: argparse.Namespace) -> int:
+    """The shift soak (``--shift``): one LineWorld in this process over a long messy line; exit 1 on a blow-up."""
+    from tqdm import tqdm
+
+    if not (1 <= args.shift <= MAX_SHIFT_FILLETS and 1 <= args.lanes <= MAX_LANES):
+        print(f"woody soak: --shift must be 1..{MAX_SHIFT_FILLETS} and --lanes 1..{MAX_LANES}", file=sys.stderr)
+        return 2
+    try:
+        meshes = load_meshes(args.meshes, "woody soak")
+    except ValueError as exc:
+        print(f"woody soak: {exc}", file=sys.stderr)
+        return 2
+    calibration = resolved_calibration()
+    with tqdm(total=args.shift, unit="fillet", file=sys.stderr, dynamic_ncols=True) as bar:
+        result = shift(list(meshes.values()), args.shift, calibration.total_mass_kg, lanes=args.lanes,
+                       seed=args.seed, config=calibrated_config(calibration), progress=bar.update)
+    for gone, rss in result.rss_mb:
+        print(f"  {gone:6d} fillets gone: {rss:7.1f} MB")
+    growth = growth_mb_per_1000(result.rss_mb)
+    hour = args.lanes * fpm_to_mps(REFERENCE_SPEED_FPM) / SHIFT_SPACING_M * 3600.0
+    print(f"shift: {result.fillets} messy fillets, {result.blowups} blow-ups, {result.sim_s:.0f} sim-s in "
+          f"{result.wall_s:.0f} s; resident memory {growth:+.1f} MB per 1,000 fillets over the second half "
+          f"({growth * hour / 1000.0:+.0f} MB per hour of a {args.lanes}-lane line at 100 FPM, "
+          f"{SHIFT_SPACING_M:g} m apart: {hour:.0f} fillets)")
+    if args.json_path:
+        Path(args.json_path).write_text(json.dumps(vars(result) | {"growth_mb_per_1000": growth}, indent=2) + "\n")
+    return 1 if result.blowups else 0
