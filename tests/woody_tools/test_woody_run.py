@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 from fixtures.rosbag2_conformance import assert_rosbag2_conformant, clock_span_ns
 
 from woody_tools.processes import entry_point, lease_domain
@@ -87,6 +88,20 @@ def test_a_plant_camera_is_rendered_as_its_file_describes_and_the_vision_grades_
     assert info.distortion_model == "rational_polynomial" and list(info.d)[0] == pytest.approx(0.45)
     (top,) = [t for t in tf.transforms if t.child_frame_id == "top_camera_optical_frame"]
     assert (top.transform.translation.y, top.transform.translation.z) == pytest.approx((-0.05, 0.70))
+    # set the vision up from that recording alone: the mount and the line the camera file describes
+    params = tmp_path / "setup" / "params.yaml"
+    setup = subprocess.run([entry_point("woody"), "camera", "setup", str(out / "line.mcap"), "--out", str(params)],
+                           capture_output=True, text=True, timeout=300)
+    assert setup.returncode == 0, setup.stderr[-2000:]
+    found = yaml.safe_load(params.read_text())
+    grader, segmenter = found["/**/grader"]["ros__parameters"], found["/**/segmenter"]["ros__parameters"]
+    assert grader["lanes"] == segmenter["lanes"] == 3 and segmenter["lane_pitch_m"] == pytest.approx(0.16, abs=0.005)
+    assert grader["camera_height_m"] == pytest.approx(0.70, abs=0.005)
+    assert grader["roller_edge_offset_m"] == pytest.approx(0.18, abs=0.005)
+    tilt, roll, yaw = (float(v) for v in re.search(r"tilt ([-+.\d]+) deg .* roll ([-+.\d]+) deg .* yaw ([-+.\d]+) deg",
+                                                   setup.stdout).groups())
+    assert (tilt, roll, yaw) == pytest.approx((5.0, 3.0, -2.0), abs=0.5)
+    assert params.with_suffix(".png").stat().st_size > 1000
 
 
 def test_outside_the_calibrated_speeds_no_woody_fillet_is_graded_normal(tmp_path):

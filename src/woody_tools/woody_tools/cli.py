@@ -22,6 +22,8 @@ SUBCOMMANDS = [
     ("calibrate", "calibrate", "fit M, c and the drive friction to the paper's side view, choose the Φ threshold; "
                                "writes config/calibration.yaml"),
     ("soak", "soak", "physics soak: N fillet passages over the roller across k, mass, speed and lanes; blow-ups"),
+    ("camera", "camera", "`woody camera setup BAG --out PARAMS.yaml`: the camera's mount, the flow, roller edge and "
+                         "lanes from a recording; the vision's parameters"),
 ]
 """(subcommand, module in woody_tools.commands with add_arguments(parser) and run(args) -> int, help)."""
 
