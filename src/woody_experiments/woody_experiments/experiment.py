@@ -47,16 +47,18 @@ from woody_common.line import LANE_PITCH_M, fpm_to_mps
 from woody_experiments.conditions import TIDY, run_placement
 from woody_experiments.runs_csv import RUN_COLUMNS  # noqa: F401 - the rows' columns, importable from here too
 from woody_sim.line_conditions import FilletPlacement, place_mesh
-from woody_sim.line_geometry import LineGeometry, top_camera_preset
+from woody_sim.line_geometry import LineGeometry, PinholeCamera, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config, seed_dynamic_friction
 from woody_sim.meshes import FilletMesh
-from woody_sim.rendering import LineRenderer
+from woody_sim.rendering import LineRenderer, camera_info_fields
 from woody_sim.sensor_model import sensor_preset
+from woody_vision.belt_view import BeltView, CameraModel
 from woody_vision.camera_model import LaneLayout, belt_outline
 from woody_vision.grader_core import FilletGrader, TrackObservation, calibrated_rules
 from woody_vision.grading import GradingRules
 from woody_vision.segmentation import REAL_CAMERA_FILTERS, BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.side_view import SidePassageTracker
+from woody_vision.static_frames import Pose
 from woody_vision.tracking import CentroidTracker
 
 SPAWN_X = -0.42
@@ -284,6 +286,12 @@ class _LaneCopies:
         self.shifts = {}
 
 
+def _camera_model(camera: PinholeCamera) -> CameraModel:
+    """What the camera's camera_info says of it (woody_sim.rendering.camera_info_fields)."""
+    info = camera_info_fields(camera)
+    return CameraModel(info["width"], info["height"], tuple(info["k"]), tuple(info["d"]), info["distortion_model"])
+
+
 class _TopView:
     """The top camera of one run as the segmenter and grader see it: sensor model, segmentation, tracking, Φ."""
 
@@ -303,8 +311,11 @@ class _TopView:
         self.segmentation = SegmentationParams() if self.camera.ideal else REAL_CAMERA_SEGMENTATION
         self.keep_color = keep_color
         """Deliver the colour frame even when the segmentation does not use it."""
+        self.view = BeltView(_camera_model(top_cam), Pose(np.array(top_cam.position), np.array(top_cam.rotation)))
+        """The camera's frames as the segmenter works on them (its belt view, woody_vision.belt_view)."""
         while not self.background.ready:
-            self.background.add(*self._sense(*background))
+            depth, color = self._sense(*background)
+            self.background.add(self.view.depth(depth), self.view.color(color))
         self.results: dict[int, dict] = {}
         """Lane -> its first graded fillet's row fields."""
 
@@ -320,11 +331,12 @@ class _TopView:
         if self.camera.drop(self.rng):
             return None
         noisy, color = self._sense(rgb, depth)
-        used = color if self.segmentation.color_threshold else None
-        blobs = segment_depth(noisy, self.background.depth, self.segmentation, used, self.background.color,
+        seen = self.view.depth(noisy)
+        used = self.view.color(color) if self.segmentation.color_threshold else None
+        blobs = segment_depth(seen, self.background.depth, self.segmentation, used, self.background.color,
                               self.tracker.predicted_outlines(now))
         update = self.tracker.update(blobs, now)
-        observations = [TrackObservation(t.track_id, t.lane, belt_outline(t.blob.contour, noisy, self.k, self.height),
+        observations = [TrackObservation(t.track_id, t.lane, belt_outline(t.blob.contour, seen, self.k, self.height),
                                          t.unseen, t.blob.contour) for t in update.active]
         for graded in self.grader.on_tracks(now, observations, [t.track_id for t in update.ended]):
             self.results.setdefault(graded.lane, _shape_row(graded))

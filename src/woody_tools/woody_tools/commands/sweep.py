@@ -32,7 +32,8 @@ from woody_experiments.conditions import SWEEP_CONDITIONS, TIDY
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import DEFAULT_MESHES, load_meshes
 from woody_experiments.run_report import uncalibrated_speed_note
-from woody_sim.line_geometry import TOP_CAMERA_PRESETS
+from woody_sim.camera_description import is_camera_file
+from woody_sim.line_geometry import TOP_CAMERA_PRESETS, top_camera_preset
 from woody_sim.sensor_model import PRESETS
 from woody_tools import arguments
 from woody_vision.shape_score import W1, W2
@@ -58,9 +59,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="total chain mass M in kg (default: the calibration's)")
     parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
                         help="top camera error model (docs/sensors.md); use its own --out; default ideal")
-    parser.add_argument("--top-camera", default="default", choices=sorted(TOP_CAMERA_PRESETS),
-                        help="top camera geometry: default (672x376, 0.75 m) or paper (the seed system's 960x696, "
-                             "86.6 deg, 0.33 m); one camera per --out folder")
+    parser.add_argument("--top-camera", default="default", metavar="PRESET|FILE",
+                        help=f"top camera: a preset ({', '.join(sorted(TOP_CAMERA_PRESETS))}; default: 672x376, "
+                             "0.75 m; paper: the seed system's 960x696, 86.6 deg, 0.33 m) or a camera description "
+                             "file (config/cameras/*.yaml; its error model is --sensor's); one camera per --out folder")
     arguments.add_yaw_sd(parser, "one setting per --out folder")
     parser.add_argument("--lane-pitch", type=float, default=LANE_PITCH_M, metavar="M",
                         help=f"distance between lane centres (default {LANE_PITCH_M:g} m; one setting per --out "
@@ -90,6 +92,13 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"woody sweep: --lane-pitch: {exc}", file=sys.stderr)
         return 2
+    try:
+        top_camera_preset(args.top_camera)
+    except ValueError as exc:
+        print(f"woody sweep: --top-camera: {exc}", file=sys.stderr)
+        return 2
+    if is_camera_file(args.top_camera):
+        args.top_camera = str(Path(args.top_camera).resolve())  # the workers read the same file
     line = {"lane_pitch_m": args.lane_pitch}
     if args.speed_change:
         line.update(speed_change_fpm=args.speed_change[0], speed_change_at_s=args.speed_change[1])
