@@ -78,6 +78,9 @@ class Segmenter(Node):
                                     "than this is fillet (8-bit levels; 0 = off; 20 for a real camera).", 0.0, 255.0),
             color_search_px=declare(self, "color_search_px", 8, "Colour refines the outline only this close to the "
                                     "depth mask (px).", 0, 100),
+            split_by_tracks=declare(self, "split_by_tracks", False, "Split a blob holding several tracked fillets "
+                                    "side by side where the tracker predicts them: fewer unscored fillets at the "
+                                    "edge of a crowded line, more woody ones passed (docs/results.md)."),
         )
         sync = declare(self, "color_sync_tolerance_s", 0.0, "With color_threshold: a depth frame takes the colour "
                        "frame nearest its stamp within this (s); 0 = half the depth stream's frame interval, measured "
