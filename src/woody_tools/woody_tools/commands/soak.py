@@ -48,13 +48,8 @@ def run(args: argparse.Namespace) -> int:
         return run_shift(args)
     from tqdm import tqdm
 
-    if args.passages < 1 or args.jobs < 1:
-        print("woody soak: --passages and --jobs must be >= 1", file=sys.stderr)
-        return 2
-    try:
-        meshes = load_meshes(args.meshes, "woody soak")
-    except ValueError as exc:
-        print(f"woody soak: {exc}", file=sys.stderr)
+    meshes = _checked_meshes(args, "--passages and --jobs must be >= 1", args.passages >= 1 and args.jobs >= 1)
+    if meshes is None:
         return 2
     jobs = min(args.jobs, args.passages)
     share = [args.passages // jobs + (i < args.passages % jobs) for i in range(jobs)]
@@ -83,13 +78,9 @@ def run_shift(args: argparse.Namespace) -> int:
     """The shift soak (``--shift``): one LineWorld in this process over a long messy line; exit 1 on a blow-up."""
     from tqdm import tqdm
 
-    if not (1 <= args.shift <= MAX_SHIFT_FILLETS and 1 <= args.lanes <= MAX_LANES):
-        print(f"woody soak: --shift must be 1..{MAX_SHIFT_FILLETS} and --lanes 1..{MAX_LANES}", file=sys.stderr)
-        return 2
-    try:
-        meshes = load_meshes(args.meshes, "woody soak")
-    except ValueError as exc:
-        print(f"woody soak: {exc}", file=sys.stderr)
+    meshes = _checked_meshes(args, f"--shift must be 1..{MAX_SHIFT_FILLETS} and --lanes 1..{MAX_LANES}",
+                             1 <= args.shift <= MAX_SHIFT_FILLETS and 1 <= args.lanes <= MAX_LANES)
+    if meshes is None:
         return 2
     calibration = resolved_calibration()
     with tqdm(total=args.shift, unit="fillet", file=sys.stderr, dynamic_ncols=True) as bar:
@@ -106,3 +97,15 @@ def run_shift(args: argparse.Namespace) -> int:
     if args.json_path:
         Path(args.json_path).write_text(json.dumps(vars(result) | {"growth_mb_per_1000": growth}, indent=2) + "\n")
     return 1 if result.blowups else 0
+
+
+def _checked_meshes(args: argparse.Namespace, rule: str, ok: bool) -> dict | None:
+    """The mesh set when the options keep ``rule`` (``ok``) and it loads; else None after one line saying why."""
+    if not ok:
+        print(f"woody soak: {rule}", file=sys.stderr)
+        return None
+    try:
+        return load_meshes(args.meshes, "woody soak")
+    except ValueError as exc:
+        print(f"woody soak: {exc}", file=sys.stderr)
+        return None

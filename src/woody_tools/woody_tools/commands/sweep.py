@@ -83,22 +83,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     cluster.add_arguments(parser, jobs_default=cluster.default_jobs())
 
 
+def _geometry_problem(args: argparse.Namespace) -> str:
+    """What is wrong with --lane-pitch or --top-camera ('' when nothing); a camera file is made absolute, since
+    the workers read the same file."""
+    try:
+        check_lane_pitch(args.lanes, args.lane_pitch)
+    except ValueError as exc:
+        return f"--lane-pitch: {exc}"
+    try:
+        top_camera_preset(args.top_camera)
+    except ValueError as exc:
+        return f"--top-camera: {exc}"
+    if is_camera_file(args.top_camera):
+        args.top_camera = str(Path(args.top_camera).resolve())
+    return ""
+
+
 def run(args: argparse.Namespace) -> int:
     if args.lanes < 1 or args.jobs < 1 or args.scaling_probe < 0:
         print("woody sweep: --lanes and --jobs must be >= 1, --scaling-probe >= 0", file=sys.stderr)
         return 2
-    try:
-        check_lane_pitch(args.lanes, args.lane_pitch)
-    except ValueError as exc:
-        print(f"woody sweep: --lane-pitch: {exc}", file=sys.stderr)
+    problem = _geometry_problem(args)
+    if problem:
+        print(f"woody sweep: {problem}", file=sys.stderr)
         return 2
-    try:
-        top_camera_preset(args.top_camera)
-    except ValueError as exc:
-        print(f"woody sweep: --top-camera: {exc}", file=sys.stderr)
-        return 2
-    if is_camera_file(args.top_camera):
-        args.top_camera = str(Path(args.top_camera).resolve())  # the workers read the same file
     line = {"lane_pitch_m": args.lane_pitch}
     if args.speed_change:
         line.update(speed_change_fpm=args.speed_change[0], speed_change_at_s=args.speed_change[1])
