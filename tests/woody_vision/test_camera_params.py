@@ -1,4 +1,4 @@
-"""The example parameter files for common cameras (config/cameras/*.params.yaml) load into the vision nodes: every
+"""The example parameter files for common cameras (config/cameras/params/*.yaml) load into the vision nodes: every
 value is a declared parameter, in range, and taken as written."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ pytestmark = pytest.mark.ros
 CAMERAS = Path(__file__).resolve().parents[2] / "config" / "cameras"
 
 
-@pytest.mark.parametrize("path", sorted(CAMERAS.glob("*.params.yaml")), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", sorted((CAMERAS / "params").glob("*.yaml")), ids=lambda p: p.name)
 @pytest.mark.parametrize("node", ["segmenter", "grader"])
 def test_an_example_parameter_file_sets_the_nodes_parameters_as_written(path, node):
     values = yaml.safe_load(path.read_text())[f"/**/{node}"]["ros__parameters"]
