@@ -4,7 +4,6 @@ seen as its belt camera (straight down, centred), on frames the twin's renderer 
 from __future__ import annotations
 
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -21,9 +20,7 @@ VISUALS, OFFSETS = load_reference_visuals()
 
 
 def camera_model(geometry: LineGeometry) -> CameraModel:
-    info = camera_info_fields(geometry.top_camera())
-    return CameraModel.of(SimpleNamespace(width=info["width"], height=info["height"], k=info["k"], d=info["d"],
-                                          distortion_model=info["distortion_model"]))
+    return CameraModel.of(camera_info_fields(geometry.top_camera()))
 
 
 def pose(geometry: LineGeometry) -> Pose:

@@ -4,7 +4,6 @@ twin renders for a described camera; what a recording cannot tell is refused in 
 from __future__ import annotations
 
 from pathlib import Path
-from types import SimpleNamespace
 
 import pytest
 import trimesh
@@ -35,10 +34,7 @@ def recording(geometry: LineGeometry, empty: int = 6, moving: int = 30, end_x: f
         poses = {} if i < empty else {lane: flat_poses(OFFSETS, x, geometry.lane_y(lane))
                                       for lane in range(geometry.lanes)}
         frames.append((i / FPS, renderer.render_top(poses)[1]))
-    info = camera_info_fields(geometry.top_camera())
-    model = CameraModel.of(SimpleNamespace(width=info["width"], height=info["height"], k=info["k"], d=info["d"],
-                                           distortion_model=info["distortion_model"]))
-    return model, frames
+    return CameraModel.of(camera_info_fields(geometry.top_camera())), frames
 
 
 @pytest.mark.parametrize("name", ["realsense-d435", "orbbec-femto"])

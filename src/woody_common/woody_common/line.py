@@ -58,6 +58,10 @@ TOP_EDGE_OFFSET_M = 0.20
 STRAIGHT_DOWN_AXES = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, -1.0))
 """A top camera looking straight down with image rows downstream: its optical axes (the matrix's columns) in the
 belt frame (REP 103 world: x downstream, y to lane 0, z up). Optical x = world +y, y = world +x, z = world -z."""
+MOUNT_EULER = "YXZ"
+"""How a mount's angles turn a straight-down camera (SciPy's intrinsic Euler order, angles (-tilt, roll, yaw)):
+about the vertical first, then leaned, so tilt (towards downstream) and roll (towards lane 0) are the optical
+axis's lean in the belt frame."""
 DEPTH_UNIT_M = 0.001
 """What one step of a 16UC1 depth image is (REP 118: millimetres); a camera whose driver counts otherwise says so
 (line_sim's and the segmenter's ``depth_unit_m``)."""

@@ -47,7 +47,7 @@ from woody_common.line import LANE_PITCH_M, fpm_to_mps
 from woody_experiments.conditions import TIDY, run_placement
 from woody_experiments.runs_csv import RUN_COLUMNS  # noqa: F401 - the rows' columns, importable from here too
 from woody_sim.line_conditions import FilletPlacement, place_mesh
-from woody_sim.line_geometry import LineGeometry, PinholeCamera, top_camera_preset
+from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config, seed_dynamic_friction
 from woody_sim.meshes import FilletMesh
 from woody_sim.rendering import LineRenderer, camera_info_fields
@@ -286,12 +286,6 @@ class _LaneCopies:
         self.shifts = {}
 
 
-def _camera_model(camera: PinholeCamera) -> CameraModel:
-    """What the camera's camera_info says of it (woody_sim.rendering.camera_info_fields)."""
-    info = camera_info_fields(camera)
-    return CameraModel(info["width"], info["height"], tuple(info["k"]), tuple(info["d"]), info["distortion_model"])
-
-
 class _TopView:
     """The top camera of one run as the segmenter and grader see it: sensor model, segmentation, tracking, Φ."""
 
@@ -311,7 +305,8 @@ class _TopView:
         self.segmentation = SegmentationParams() if self.camera.ideal else REAL_CAMERA_SEGMENTATION
         self.keep_color = keep_color
         """Deliver the colour frame even when the segmentation does not use it."""
-        self.view = BeltView(_camera_model(top_cam), Pose(np.array(top_cam.position), np.array(top_cam.rotation)))
+        self.view = BeltView(CameraModel.of(camera_info_fields(top_cam)),
+                             Pose(np.array(top_cam.position), np.array(top_cam.rotation)))
         """The camera's frames as the segmenter works on them (its belt view, woody_vision.belt_view)."""
         while not self.background.ready:
             depth, color = self._sense(*background)

@@ -30,16 +30,15 @@ downstream, y to lane 0, z up. A wrong key or value is refused in one line namin
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import MISSING, dataclass, fields
 from pathlib import Path
 
 import yaml
 
 from woody_common.line import DEPTH_UNIT_M, MAX_CAMERA_TILT_DEG
+from woody_sim.sensor_model import ENCODINGS, PRESETS
 
 CAMERA_SUFFIXES = (".yaml", ".yml")
-SENSORS = ("ideal", "stereo", "structured_light")
-DEPTH_ENCODINGS = ("32FC1", "16UC1")
 TOP_KEYS = {"width", "height", "intrinsics", "distortion", "mount", "frame_rate_hz", "sensor", "depth_encoding",
             "depth_unit_m", "color_stamp_offset_s", "color_stamp_jitter_s", "name"}
 MOUNT_KEYS = {"height_m", "along_m", "across_m", "tilt_deg", "roll_deg", "yaw_deg"}
@@ -83,9 +82,8 @@ class CameraDescription:
              f"mount tilt_deg and roll_deg together must lean at most {MAX_CAMERA_TILT_DEG:g} deg from straight down"),
             (abs(self.yaw_deg) <= 180.0, "mount yaw_deg must be within -180..180"),
             (1.0 <= self.frame_rate_hz <= 120.0, "frame_rate_hz must be within 1..120"),
-            (self.sensor in SENSORS, f"sensor must be one of {', '.join(SENSORS)}"),
-            (self.depth_encoding in ("", *DEPTH_ENCODINGS), f"depth_encoding must be one of "
-                                                            f"{', '.join(DEPTH_ENCODINGS)}"),
+            (self.sensor in PRESETS, f"sensor must be one of {', '.join(PRESETS)}"),
+            (self.depth_encoding in ("", *ENCODINGS), f"depth_encoding must be one of {', '.join(ENCODINGS)}"),
             (1e-5 <= self.depth_unit_m <= 0.01, "depth_unit_m must be within 0.00001..0.01 m"),
             (abs(self.color_stamp_offset_s) <= 1.0 and 0.0 <= self.color_stamp_jitter_s <= 0.1,
              "color_stamp_offset_s must be within -1..1 s and color_stamp_jitter_s within 0..0.1 s"),
@@ -101,6 +99,10 @@ class CameraDescription:
                 "top_distortion": tuple(self.distortion), "top_height": self.height_m, "top_center_x": self.along_m,
                 "top_center_y": self.across_m, "top_tilt": math.radians(self.tilt_deg),
                 "top_roll": math.radians(self.roll_deg), "top_yaw": math.radians(self.yaw_deg)}
+
+
+CAMERA_DEFAULTS = {f.name: f.default for f in fields(CameraDescription) if f.default is not MISSING}
+"""What a camera without a file has: the values a file leaves out (frame rate, error model, depth unit, stamps)."""
 
 
 def is_camera_file(name: str) -> bool:

@@ -31,6 +31,7 @@ from woody_common.line import (
     LANES,
     MAX_CAMERA_TILT_DEG,
     MAX_LANES,
+    MOUNT_EULER,
     ROLLER_RADIUS_M,
     STRAIGHT_DOWN_AXES,
     TOP_CAMERA_HEIGHT_M,
@@ -177,8 +178,7 @@ class LineGeometry:
     def top_camera(self) -> PinholeCamera:
         fx = (self.top_width / 2.0) / math.tan(self.top_hfov / 2.0)
         fx, fy, cx, cy = self.top_intrinsics or (fx, fx, self.top_width / 2.0, self.top_height_px / 2.0)
-        # turned about the vertical first, then leaned: tilt and roll are the optical axis's lean in the belt frame
-        turn = Rotation.from_euler("YXZ", [-self.top_tilt, self.top_roll, self.top_yaw]).as_matrix()
+        turn = Rotation.from_euler(MOUNT_EULER, [-self.top_tilt, self.top_roll, self.top_yaw]).as_matrix()
         return PinholeCamera(
             width=self.top_width,
             height=self.top_height_px,

@@ -36,7 +36,6 @@ from woody_common.images import image_message
 from woody_common.line import (
     BELT_MARGIN_M,
     CLASS_K,
-    DEPTH_UNIT_M,
     LANE_PITCH_M,
     LANE_PITCH_RANGE_M,
     LANES,
@@ -59,7 +58,7 @@ from woody_common.ros_params import calibrated_defaults, check_overrides, declar
 from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletSpawn, FilletTrackArray
 from woody_msgs.srv import SpawnFillet
-from woody_sim.camera_description import is_camera_file, load_camera
+from woody_sim.camera_description import CAMERA_DEFAULTS, is_camera_file, load_camera
 from woody_sim.frame_schedule import FrameSchedule
 from woody_sim.line_conditions import (
     MAX_LATERAL_M,
@@ -83,9 +82,9 @@ from woody_sim.spawn_schedule import SpawnSchedule
 from woody_sim.split_world import MAX_PHYSICS_WORKERS, SplitLineWorld
 
 SENSOR_STREAM = 11
+"""Second seed word of the camera error model's random stream (the first is the node's ``seed``)."""
 STAMP_STREAM = 13
 """Second seed word of the colour stamps' jitter draws."""
-"""Second seed word of the camera error model's random stream (the first is the node's ``seed``)."""
 HELD_WARN_S = 1.0
 """A line held this long (wall s) by what it waits for says so on /diagnostics."""
 CLOCK_PERIOD = 0.005
@@ -175,28 +174,24 @@ class LineSim(Node):
         top_camera = declare(self, "top_camera", "default", "Top camera: a preset, default (672x376 at 0.75 m) or "
                              "paper (the seed system's 960x696, 86.6 deg, 0.33 m), or a camera description file "
                              "(*.yaml: resolution, intrinsics, distortion, mount, timing; config/cameras/).")
-        described = load_camera(top_camera) if is_camera_file(top_camera) else None
-        top_rate = declare(self, "top_rate_hz", described.frame_rate_hz if described else 30.0,
-                           "Top-down RGB-D frame rate (Hz).", 1.0, 120.0)
-        self.sensor = sensor_preset(declare(self, "sensor", described.sensor if described else "ideal",
-                                            "Top RGB-D camera error model: ideal, stereo or structured_light "
-                                            "(docs/sensors.md)."))
-        encoding = declare(self, "depth_encoding", (described.depth_encoding if described else "")
-                           or self.sensor.encoding, "Top depth image encoding: 32FC1 (metres) or 16UC1 (steps of "
-                           "depth_unit_m); default the error model's.")
+        given = vars(load_camera(top_camera)) if is_camera_file(top_camera) else CAMERA_DEFAULTS
+        top_rate = declare(self, "top_rate_hz", given["frame_rate_hz"], "Top-down RGB-D frame rate (Hz).", 1.0,
+                           120.0)
+        self.sensor = sensor_preset(declare(self, "sensor", given["sensor"], "Top RGB-D camera error model: ideal, "
+                                            "stereo or structured_light (docs/sensors.md)."))
+        encoding = declare(self, "depth_encoding", given["depth_encoding"] or self.sensor.encoding, "Top depth "
+                           "image encoding: 32FC1 (metres) or 16UC1 (steps of depth_unit_m); default the error "
+                           "model's.")
         if encoding not in ENCODINGS:
             raise ValueError(f"depth_encoding must be one of {', '.join(ENCODINGS)}, got {encoding!r}")
         self.depth_encoding = encoding
-        self.depth_unit_m = declare(self, "depth_unit_m", described.depth_unit_m if described else DEPTH_UNIT_M,
-                                    "One step of a 16UC1 depth image (m; REP 118: 0.001).", 1e-5, 0.01)
-        self.color_offset_s = declare(self, "color_stamp_offset_s",
-                                      described.color_stamp_offset_s if described else 0.0,
-                                      "Colour frames' stamp minus their depth frame's (s), as a driver that does "
-                                      "not align them stamps them.", -1.0, 1.0)
-        self.color_jitter_s = declare(self, "color_stamp_jitter_s",
-                                      described.color_stamp_jitter_s if described else 0.0,
-                                      "Standard deviation of a random part of the colour stamps' offset (s).",
-                                      0.0, 0.1)
+        self.depth_unit_m = declare(self, "depth_unit_m", given["depth_unit_m"], "One step of a 16UC1 depth image "
+                                    "(m; REP 118: 0.001).", 1e-5, 0.01)
+        self.color_offset_s = declare(self, "color_stamp_offset_s", given["color_stamp_offset_s"], "Colour "
+                                      "frames' stamp minus their depth frame's (s), as a driver that does not "
+                                      "align them stamps them.", -1.0, 1.0)
+        self.color_jitter_s = declare(self, "color_stamp_jitter_s", given["color_stamp_jitter_s"], "Standard "
+                                      "deviation of a random part of the colour stamps' offset (s).", 0.0, 0.1)
         return top_camera, top_rate
 
     def _declare_start_gate(self) -> None:

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from woody_common.line import PAPER_SPEEDS_FPM, fpm_to_mps
+from woody_common.line import PAPER_SPEEDS_FPM, REFERENCE_SPEED_FPM, fpm_to_mps
 from woody_sim.line_conditions import line_preset, place_mesh, placement_for
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig
@@ -151,7 +151,7 @@ class ShiftResult:
     """(fillets gone, this process's resident memory MB) at every sample."""
 
 
-def shift(meshes: list[FilletMesh], fillets: int, mass: float, lanes: int = 3, speed_fpm: float = 100.0,
+def shift(meshes: list[FilletMesh], fillets: int, mass: float, lanes: int = 3, speed_fpm: float = REFERENCE_SPEED_FPM,
           seed: int = 0, samples: int = 20, config: PhysicsConfig | None = None,
           progress: Callable[[int], None] | None = None) -> ShiftResult:
     """Run ``fillets`` placed fillets of a messy line (each turned, sized and offset its own way, woody_sim.

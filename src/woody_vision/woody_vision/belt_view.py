@@ -19,7 +19,9 @@ centred, with no distortion is the belt camera itself: its frames pass unchanged
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -45,7 +47,9 @@ class CameraModel:
 
     @classmethod
     def of(cls, info) -> CameraModel:
-        """From a sensor_msgs/CameraInfo (or anything with its fields)."""
+        """From a sensor_msgs/CameraInfo, anything with its fields, or a mapping of them."""
+        if isinstance(info, Mapping):
+            info = SimpleNamespace(**info)
         return cls(int(info.width), int(info.height), tuple(float(v) for v in info.k),
                    tuple(float(v) for v in info.d), str(info.distortion_model))
 
@@ -58,6 +62,15 @@ class CameraModel:
         return np.asarray(self.k, dtype=float).reshape(3, 3)
 
 
+def rays(camera: CameraModel) -> np.ndarray:
+    """(H, W, 3) undistorted rays with z = 1 in the camera's optical frame: a pixel's 3D point is its z-depth
+    times its ray."""
+    u, v = np.meshgrid(np.arange(camera.width, dtype=float), np.arange(camera.height, dtype=float))
+    normalised = cv2.undistortPoints(np.stack([u, v], -1).reshape(-1, 1, 2), camera.matrix, np.asarray(camera.d, float))
+    xy = normalised.reshape(camera.height, camera.width, 2)
+    return np.concatenate([xy, np.ones(xy.shape[:2] + (1,))], axis=-1)
+
+
 def view_problem(camera: CameraModel, pose: Pose) -> str:
     """Why a camera with this model and pose in the belt frame cannot be turned into the belt camera ('' if it can)."""
     if camera.distorted and camera.distortion_model not in DISTORTION_MODELS:
@@ -66,12 +79,6 @@ def view_problem(camera: CameraModel, pose: Pose) -> str:
     if camera.distorted and len(camera.d) not in (4, 5, 8):
         return f"distortion D has {len(camera.d)} coefficients, not 4, 5 or 8"
     return mount_problem(camera_mount(pose))
-
-
-def belt_camera_pose(pose: Pose) -> Pose:
-    """The belt camera of a camera at ``pose``: its height and place along the flow, centred, straight down."""
-    x, _, z = pose.translation
-    return Pose(np.array([x, 0.0, z]), STRAIGHT_DOWN.copy())
 
 
 class BeltView:
@@ -85,7 +92,7 @@ class BeltView:
         self.camera = camera
         self.pose = pose
         self.height_m = float(pose.translation[2])
-        self.identity = not camera.distorted and np.allclose(pose.rotation, STRAIGHT_DOWN, atol=1e-9) \
+        self.identity = not camera.distorted and np.allclose(pose.rotation, STRAIGHT_DOWN, atol=IDEAL_TOLERANCE) \
             and abs(float(pose.translation[1])) < IDEAL_TOLERANCE
         if not self.identity:
             self._map_u, self._map_v = self._maps()
@@ -107,12 +114,7 @@ class BeltView:
 
     def _cosines(self) -> np.ndarray:
         """Per real-camera pixel: belt-camera z-depth per unit of the real camera's z-depth along its ray."""
-        c = self.camera
-        u, v = np.meshgrid(np.arange(c.width, dtype=float), np.arange(c.height, dtype=float))
-        points = np.stack([u, v], axis=-1).reshape(-1, 1, 2)
-        normalised = cv2.undistortPoints(points, c.matrix, np.asarray(c.d, float)).reshape(-1, 2)
-        rays = np.column_stack([normalised, np.ones(len(normalised))])
-        return (-(rays @ self.pose.rotation.T)[:, 2]).reshape(c.height, c.width).astype(np.float32)
+        return (-(rays(self.camera) @ self.pose.rotation.T)[..., 2]).astype(np.float32)
 
     def depth(self, depth: np.ndarray) -> np.ndarray:
         """A float32 metres depth frame of the real camera as the belt camera's (NaN where it sees nothing)."""
@@ -133,4 +135,3 @@ class BeltView:
 def straight_down_pose(height_m: float, along_m: float = 0.0) -> Pose:
     """The pose of an ideal camera ``height_m`` above the belt, ``along_m`` along the flow, centred, straight down."""
     return Pose(np.array([along_m, 0.0, height_m]), STRAIGHT_DOWN.copy())
-

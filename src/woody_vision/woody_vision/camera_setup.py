@@ -28,7 +28,8 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from woody_vision.belt_view import CameraModel
+from woody_common.line import MOUNT_EULER
+from woody_vision.belt_view import CameraModel, rays
 from woody_vision.static_frames import STRAIGHT_DOWN, Pose
 
 RISE_M = 0.005
@@ -103,16 +104,8 @@ class BeltSetup:
     def mount_deg(self) -> tuple[float, float, float]:
         """(tilt, roll, yaw) in degrees, as a camera description file gives them (woody_sim.camera_description)."""
         turn = self.pose.rotation @ STRAIGHT_DOWN.T
-        lean, roll, yaw = Rotation.from_matrix(turn).as_euler("YXZ", degrees=True)
+        lean, roll, yaw = Rotation.from_matrix(turn).as_euler(MOUNT_EULER, degrees=True)
         return float(-lean), float(roll), float(yaw)
-
-
-def rays(camera: CameraModel) -> np.ndarray:
-    """(H, W, 3) undistorted rays with z = 1: a pixel's 3D point is its z-depth times its ray."""
-    u, v = np.meshgrid(np.arange(camera.width, dtype=float), np.arange(camera.height, dtype=float))
-    normalised = cv2.undistortPoints(np.stack([u, v], -1).reshape(-1, 1, 2), camera.matrix, np.asarray(camera.d, float))
-    xy = normalised.reshape(camera.height, camera.width, 2)
-    return np.concatenate([xy, np.ones(xy.shape[:2] + (1,))], axis=-1)
 
 
 def find_setup(camera: CameraModel, frames: Sequence[tuple[float, np.ndarray]], seed: int = 0) -> BeltSetup:

@@ -409,12 +409,20 @@ def _all_side_by_side(priors: list[np.ndarray]) -> bool:
     boxes = [cv2.boundingRect(prior) for prior in priors]
     for i, (u, v, width, rows) in enumerate(boxes):
         for other_u, other_v, other_width, other_rows in boxes[i + 1:]:
-            shared_rows = min(v + rows, other_v + other_rows) - max(v, other_v)
-            shared_columns = min(u + width, other_u + other_width) - max(u, other_u)
-            if shared_rows < SIDE_BY_SIDE_OVERLAP * min(rows, other_rows) or \
-                    shared_columns > 0.5 * min(width, other_width):
+            shared_columns = _shared(u, width, other_u, other_width)
+            if not _rows_side_by_side(v, rows, other_v, other_rows) or shared_columns > 0.5 * min(width, other_width):
                 return False
     return True
+
+
+def _shared(start: int, length: int, other_start: int, other_length: int) -> int:
+    """How much two spans of pixels overlap (negative: the gap between them)."""
+    return min(start + length, other_start + other_length) - max(start, other_start)
+
+
+def _rows_side_by_side(top: int, rows: int, other_top: int, other_rows: int) -> bool:
+    """Whether two things spanning these rows share SIDE_BY_SIDE_OVERLAP of the shorter one's rows."""
+    return _shared(top, rows, other_top, other_rows) >= SIDE_BY_SIDE_OVERLAP * min(rows, other_rows)
 
 
 def _held(mask: np.ndarray, prior: np.ndarray, origin: tuple[int, int]) -> bool:
@@ -440,9 +448,8 @@ def _side_by_side(core: np.ndarray, other: np.ndarray) -> bool:
     ``SIDE_BY_SIDE_OVERLAP`` of the shorter one's rows. A thick part ahead of or behind a core is the same fillet
     (a fillet reads thicker where it lies over the roller's crown, since the background falls away there) or a
     fillet one behind the other, which a neck separates (:func:`_split_by_distance`), never one beside it."""
-    (top, rows), (other_top, other_rows) = ((c[cv2.CC_STAT_TOP], c[cv2.CC_STAT_HEIGHT]) for c in (core, other))
-    shared = min(top + rows, other_top + other_rows) - max(top, other_top)
-    return shared >= SIDE_BY_SIDE_OVERLAP * min(rows, other_rows)
+    return _rows_side_by_side(core[cv2.CC_STAT_TOP], core[cv2.CC_STAT_HEIGHT], other[cv2.CC_STAT_TOP],
+                              other[cv2.CC_STAT_HEIGHT])
 
 
 def _region_masks(labels: np.ndarray, regions) -> list[tuple[np.ndarray, None]]:

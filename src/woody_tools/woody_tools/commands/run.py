@@ -185,10 +185,11 @@ def _validate_top_camera(args: argparse.Namespace) -> None:
     """A top camera preset, or a description file made absolute for the nodes; ``--sensor`` not given becomes the
     file's error model (else ideal)."""
     try:
-        top_camera_preset(args.top_camera)
+        described = load_camera(args.top_camera) if is_camera_file(args.top_camera) else None
+        if described is None:
+            top_camera_preset(args.top_camera)
     except ValueError as exc:
         raise RunRefused(f"--top-camera: {exc}") from None
-    described = load_camera(args.top_camera) if is_camera_file(args.top_camera) else None
     if described is not None:
         args.top_camera = str(Path(args.top_camera).resolve())
     if args.sensor is None:
