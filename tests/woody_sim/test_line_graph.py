@@ -208,3 +208,15 @@ def test_line_sim_holds_its_first_step_until_the_recorder_listens_to_every_topic
     step = first["/clock"]  # the first physics step's time: the line's first frames go out with it
     assert 0.0 < step < 0.005 and first["/top_camera/depth/image_raw"] == first["/side_camera/image_raw"] == step
     assert "/line/ground_truth" in first and frames == 31  # dt, then every 1/30 s to 1.0 s: none before the recorder
+
+
+def test_line_sim_takes_a_coarser_physics_step_and_chain_when_asked(ros_domain, tmp_path):
+    """The physics settings docs/physics.md measures are parameters: the step rate, solver iterations, slices."""
+    sim = NodeProcess("line_sim", {"duration_s": 0.5, "physics_rate_hz": 360.0, "solver_iterations": 10,
+                                   "segments": 30, "side_rate_hz": 0.0}, domain_id=ros_domain, log_dir=tmp_path)
+    try:
+        assert sim.process.wait(120) == 0, sim.log_tail()
+    finally:
+        sim.stop()
+    log = sim.log_path.read_text()
+    assert "physics dt=2.78 ms, 30 segments, 10 solver iterations" in log

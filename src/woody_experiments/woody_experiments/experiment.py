@@ -113,6 +113,9 @@ class RunSpec:
     speed_change_fpm: float = 0.0
     """A belt speed change during the run (FPM; 0 = none), at ``speed_change_at_s`` of sim time."""
     speed_change_at_s: float = 0.0
+    spawn_offset_m: float = 0.0
+    """Moves the spawn downstream (m): the same fillet meets the camera's frame grid at another phase, as fillets of
+    a line do from one to the next (the run-to-run spread of a score)."""
 
     def physics_overrides(self) -> dict:
         """PhysicsConfig fields this run sets itself (the rest come from the calibration)."""
@@ -146,8 +149,9 @@ def _renderer(geometry: LineGeometry, top: bool, side: bool):
 
 
 def run_geometry(spec: RunSpec) -> LineGeometry:
-    """The line of one run: its lanes, lane pitch and top camera, fillets spawned at ``SPAWN_X``."""
-    return LineGeometry(lanes=spec.lanes, lane_pitch=spec.lane_pitch_m, spawn_x=SPAWN_X,
+    """The line of one run: its lanes, lane pitch and top camera, fillets spawned at ``SPAWN_X`` (and the run's
+    offset)."""
+    return LineGeometry(lanes=spec.lanes, lane_pitch=spec.lane_pitch_m, spawn_x=SPAWN_X + spec.spawn_offset_m,
                         **top_camera_preset(spec.top_camera))
 
 
@@ -192,7 +196,7 @@ def evaluate_run(spec: RunSpec, mesh: FilletMesh, config: PhysicsConfig | None =
             poses = None
             if not top_done and now + 1e-9 >= next_top:
                 next_top += top_dt * max(1, math.floor((now + 1e-9 - next_top) / top_dt) + 1)
-                if top_start_x is None or n_top or SPAWN_X + speed * now + lead_offset >= top_start_x:
+                if top_start_x is None or n_top or geometry.spawn_x + speed * now + lead_offset >= top_start_x:
                     poses = lanes.poses()
                     _top_step(top, renderer, poses, now, on_top_frame, lanes, side_frames)
                     n_top += 1

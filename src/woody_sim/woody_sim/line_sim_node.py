@@ -109,7 +109,8 @@ class LineSim(Node):
         self.summary = (  # logged when the line starts, i.e. once every parameter has been accepted
             f"{p.lanes} lanes at {p.speed_fpm:g} FPM ({self.speed:.3f} m/s), {p.pitch:g} m apart, "
             f"{len(self.meshes)} meshes, k from {self.k_values}, "
-            f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, top {p.top_rate:g} Hz, "
+            f"M={self.mass:g} kg, physics dt={self.world.config.dt * 1e3:.2f} ms, {self.world.config.n_segments} "
+            f"segments, {self.world.config.solver_iterations} solver iterations, top {p.top_rate:g} Hz, "
             f"side {p.side_rate:g} Hz on lane {self.geometry.watched_lane}, top camera model {self.sensor.name}; "
             f"{p.line} line: yaw sd {c.yaw_sd_deg:g} deg (max {c.yaw_max_deg:g}), {c.blunt_fraction:g} blunt end "
             f"first, lateral sd {c.lateral_sd_m:g} m (max {c.lateral_max_m:g}), size x{c.scale_min:g}-"
@@ -137,10 +138,10 @@ class LineSim(Node):
                             "while a segment holds the belt speed.", 0.0, 10.0)
         mu_dynamic = declare(self, "friction_dynamic", calibrated["friction_dynamic"], "Coulomb cap of the belt drive "
                              "once a segment slips.", 0.0, 10.0)
-        segments = declare(self, "segments", 40, "Rigid segments N per fillet.", 2, 200)
         workers = declare(self, "physics_workers", 1, "Worker processes that share the physics with this one, "
                           "each spawn going to the process with the fewest live fillets (0 = all physics in this "
                           "process; at most the core count).", 0, MAX_PHYSICS_WORKERS)
+        physics = self._declare_physics()
         top_camera, top_rate = self._declare_top_camera()
         side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0,
                             MAX_SIDE_RATE_HZ)
@@ -164,9 +165,22 @@ class LineSim(Node):
             raise ValueError(f"side_lane {side_lane} is not a lane (0..{lanes - 1})")
         return SimpleNamespace(
             lanes=lanes, speed_fpm=speed_fpm, mesh_spec=mesh_spec, seed=seed,
-            damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, segments=segments, workers=workers,
+            damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, physics=physics, workers=workers,
             top_rate=top_rate, side_rate=side_rate, side_idle=side_idle, side_lane=side_lane,
             top_camera=top_camera, max_lead=max_lead)
+
+    def _declare_physics(self) -> dict:
+        """The chain's resolution and the physics step: PhysicsConfig fields (docs/physics.md, "What each setting
+        costs and what it changes", measures what a coarser one saves and moves)."""
+        defaults = PhysicsConfig()
+        segments = declare(self, "segments", defaults.n_segments, "Rigid segments N per fillet (the paper's 40; "
+                           "fewer are faster but a stiffer fillet at the same k).", 2, 200)
+        rate = declare(self, "physics_rate_hz", 1.0 / defaults.dt, "Physics steps per second of sim time (360 is "
+                       "1.4x faster and moves the scores within a few percent; 240 lets stiff chains whip on the "
+                       "roller).", 240.0, 4800.0)
+        iterations = declare(self, "solver_iterations", defaults.solver_iterations, "Contact solver iterations "
+                             "per physics step.", 1, 200)
+        return {"n_segments": segments, "dt": 1.0 / rate, "solver_iterations": iterations}
 
     def _declare_top_camera(self) -> tuple[str, float]:
         """The top camera (a preset or a description file) and its frame rate; its error model and colour stamps
@@ -262,7 +276,7 @@ class LineSim(Node):
         self.speed = fpm_to_mps(p.speed_fpm)
         self.geometry = LineGeometry(lanes=p.lanes, lane_pitch=p.pitch, side_lane=p.side_lane,
                                      **top_camera_preset(p.top_camera))
-        config = PhysicsConfig(n_segments=p.segments, damping=p.damping, friction_static=p.mu_static,
+        config = PhysicsConfig(**p.physics, damping=p.damping, friction_static=p.mu_static,
                                friction_dynamic=p.mu_dynamic)
         self.world = (SplitLineWorld(self.geometry, config, p.workers, start_method=CHILD_START)
                       if p.workers else LineWorld(self.geometry, config))
