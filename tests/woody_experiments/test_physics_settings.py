@@ -33,3 +33,13 @@ def test_the_default_moves_nothing_and_a_coarser_step_is_cheaper_and_moves_the_s
     assert coarse.changes["nmdm"][0] > 0.0 and coarse.runs == 1
     table = physics_settings.markdown_table(figures)
     assert "| 240 Hz | 1.000 | 2.00× |" in table and table.count("\n") == 2 + len(figures)
+
+
+def test_a_coarser_chain_carries_the_papers_hinges_in_series_and_bends_like_its_chain():
+    from woody_sim.line_world import PhysicsConfig, calibrated_config
+
+    assert PhysicsConfig().hinge_scale == 1.0 and PhysicsConfig(n_segments=20).hinge_scale == 0.5
+    mesh = generate_fillet(0)
+    spec = RunSpec(mesh=mesh.name, k=100.0, speed_fpm=100.0, top=False)
+    paper, coarse = (evaluate_run(spec, mesh, calibrated_config(n_segments=n))[1] for n in (40, 20))
+    assert coarse["nmdm"] == pytest.approx(paper["nmdm"], rel=0.02)  # an unscaled 20-slice chain is stiffer

@@ -42,6 +42,7 @@ SETTINGS: dict[str, dict] = {
     "30 slices": {"n_segments": 30},
     "20 slices": {"n_segments": 20},
     "30 slices, 360 Hz": {"n_segments": 30, "dt": 1.0 / 360.0},
+    "24 slices, 360 Hz": {"n_segments": 24, "dt": 1.0 / 360.0},
     "20 slices, 360 Hz": {"n_segments": 20, "dt": 1.0 / 360.0},
 }
 """Name -> PhysicsConfig overrides; the first is the default every other is compared with."""

@@ -23,7 +23,9 @@ import numpy as np
 
 from woody_sim.meshes import FilletMesh, HeightMap
 
-DEFAULT_SEGMENTS = 40
+PAPER_SEGMENTS = 40
+"""Slices of the paper's chain; its k and c are per hinge of it (PhysicsConfig.hinge_scale)."""
+DEFAULT_SEGMENTS = PAPER_SEGMENTS
 NOMINAL_MASS = 1.0
 """kg the geometry is built with; masses scale linearly, and LineWorld sets each fillet's calibrated M."""
 VISUAL_ROWS = 20

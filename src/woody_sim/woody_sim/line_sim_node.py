@@ -174,7 +174,7 @@ class LineSim(Node):
         costs and what it changes", measures what a coarser one saves and moves)."""
         defaults = PhysicsConfig()
         segments = declare(self, "segments", defaults.n_segments, "Rigid segments N per fillet (the paper's 40; "
-                           "fewer are faster but a stiffer fillet at the same k).", 2, 200)
+                           "k and c are scaled so that fewer, faster ones bend like the paper's chain).", 2, 200)
         rate = declare(self, "physics_rate_hz", 1.0 / defaults.dt, "Physics steps per second of sim time (360 is "
                        "1.4x faster and moves the scores within a few percent; 240 lets stiff chains whip on the "
                        "roller).", 240.0, 4800.0)

@@ -59,7 +59,7 @@ from woody_common.line import MAX_SPEED_MPS
 from woody_sim import fillet_model, meshes
 from woody_sim.belt_drive import belt_drive
 from woody_sim.disk_cache import cached, digest
-from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
+from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, PAPER_SEGMENTS, FilletModel, build_fillet_model
 from woody_sim.hinge_law import chain_mass_matrix, hinge_state, implicit_hinge_torque
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.meshes import DERIVED_MARK, FilletMesh
@@ -106,6 +106,17 @@ class PhysicsConfig:
     inertia_floor: float = 0.3
     """Least inertia of a segment about its hinge axis, as a fraction of the segments' mean (an armature on the
     thin tip slices, without which pybullet's contact solver whips them; see :func:`segment_inertias`)."""
+
+    @property
+    def hinge_scale(self) -> float:
+        """What one hinge of this chain carries of the paper's k and c (N / PAPER_SEGMENTS).
+
+        The paper's k and c belong to each hinge of its 40-slice chain. A chain of N slices is the same fillet at
+        another resolution when each hinge bends like the PAPER_SEGMENTS / N paper hinges it stands for: springs
+        and dampers in series, so k and c scale by N / 40 and the fillet's bending stiffness (k times the slice
+        length) stays. Without it fewer, longer slices would be a stiffer fillet at the same k
+        (docs/physics.md, "What each setting costs and what it changes")."""
+        return self.n_segments / PAPER_SEGMENTS
 
     def __post_init__(self) -> None:
         if not 1e-7 <= self.dt <= 0.02:
@@ -613,7 +624,9 @@ class LineWorld:
         removes a chain, after which it can return another chain's: docs/physics.md)."""
         cfg = self.config
         mass = chain_mass_matrix(fillet.state, fillet.model.masses, fillet.inertias, fillet.joint_offsets)
-        return implicit_hinge_torque(mass, theta, rate, fillet.rate, fillet.torque, fillet.info.k, cfg.damping, cfg.dt)
+        scale = cfg.hinge_scale
+        return implicit_hinge_torque(mass, theta, rate, fillet.rate, fillet.torque, fillet.info.k * scale,
+                                     cfg.damping * scale, cfg.dt)
 
     def _update_drive(self, dynamic: list[_Fillet]) -> None:
         """The seed's belt drive on every touching segment (:func:`~woody_sim.belt_drive.belt_drive`).

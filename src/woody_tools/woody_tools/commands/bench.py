@@ -74,8 +74,9 @@ def _physics_settings(args: argparse.Namespace, reference: float) -> int:
     print(f"woody bench physics: {len(SETTINGS)} settings x {runs} runs ({len(meshes)} meshes, k {args.k}, "
           f"{args.speeds} FPM); each timed over {args.seconds:g} sim-s of a {PHYSICS_FILLETS}-fillet line", flush=True)
 
-    def cost(config) -> float:
-        return 1.0 / benchmark_physics(PHYSICS_FILLETS, args.seconds, config)["sim_s_per_wall_s"]
+    def cost(config) -> float:  # the better of two runs: which fillets cross the roller together varies
+        return min(1.0 / benchmark_physics(PHYSICS_FILLETS, args.seconds, config)["sim_s_per_wall_s"]
+                   for _ in range(2))
 
     figures = evaluate_settings(meshes, args.k, args.speeds, cost, progress=lambda name: print(f"  {name}", flush=True))
     table = markdown_table(figures)
