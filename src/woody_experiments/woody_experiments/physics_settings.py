@@ -26,10 +26,11 @@ import numpy as np
 from woody_common.calibration import resolved_calibration
 from woody_common.line import fpm_to_mps
 from woody_experiments.experiment import TOP_RATE_HZ, RunSpec, evaluate_run
+from woody_experiments.line_grade import conditions_of
 from woody_sim.line_world import PhysicsConfig, calibrated_config
 from woody_sim.meshes import FilletMesh
 from woody_vision.grader_core import calibrated_rules
-from woody_vision.grading import FilletConditions
+from woody_vision.grading import GradingRules
 
 SETTINGS: dict[str, dict] = {
     "default (480 Hz, 20 iterations)": {},
@@ -48,8 +49,9 @@ SETTINGS: dict[str, dict] = {
 """Name -> PhysicsConfig overrides; the first is the default every other is compared with."""
 DEFAULT = next(iter(SETTINGS))
 SPREAD = "the default, a third of a frame later"
-SPREAD_FRAMES = 1.0 / 3.0
 """The yardstick row: the default's own run-to-run spread."""
+SPREAD_FRAMES = 1.0 / 3.0
+"""How much later (camera frames) the yardstick row spawns each fillet."""
 SCORES = ("phi", "line_phi", "nmdm", "be")
 
 
@@ -87,21 +89,21 @@ def evaluate_settings(meshes: list[FilletMesh], ks: list[float], speeds: list[fl
         return out
 
     baseline = rows_of({})
+    rules = calibrated_rules(calibration)
     default_cost = cost(calibrated_config(calibration))
-    figures = [_figures(DEFAULT, default_cost, default_cost, baseline, baseline, calibration),
-               _figures(SPREAD, math.nan, default_cost, rows_of({}, SPREAD_FRAMES), baseline, calibration)]
+    figures = [_figures(DEFAULT, default_cost, default_cost, baseline, baseline, rules),
+               _figures(SPREAD, math.nan, default_cost, rows_of({}, SPREAD_FRAMES), baseline, rules)]
     for name, overrides in list(SETTINGS.items())[1:]:
         if progress is not None:
             progress(name)
         spent = cost(calibrated_config(calibration, **overrides))
-        figures.append(_figures(name, spent, default_cost, rows_of(overrides), baseline, calibration))
+        figures.append(_figures(name, spent, default_cost, rows_of(overrides), baseline, rules))
     return figures
 
 
 def _figures(name: str, spent: float, default_cost: float, rows: dict, baseline: dict,
-             calibration) -> SettingFigures:
+             rules: GradingRules) -> SettingFigures:
     changes = {score: _changes(rows, baseline, score) for score in SCORES}
-    rules = calibrated_rules(calibration)
     right = sum(_graded_right(lanes, rules) for lanes in rows.values())
     speedup = default_cost / spent if math.isfinite(spent) else math.nan
     return SettingFigures(name, spent, speedup, changes, right, len(rows))
@@ -114,15 +116,11 @@ def _changes(rows: dict, baseline: dict, score: str) -> tuple[float, float]:
     return (float(np.median(moved)), float(np.max(moved))) if moved else (math.nan, math.nan)
 
 
-def _graded_right(lanes: list[dict], rules) -> bool:
-    """Whether the run's vote (the median line score over its lanes against each lane's cut) is right."""
-    votes = [rules.is_woody(row["line_phi"], _conditions(row)) for row in lanes if math.isfinite(row["line_phi"])]
+def _graded_right(lanes: list[dict], rules: GradingRules) -> bool:
+    """Whether the run's vote (the median of its lanes' verdicts, each lane's line score against its own cut) is
+    right."""
+    votes = [rules.is_woody(row["line_phi"], conditions_of(row)) for row in lanes if math.isfinite(row["line_phi"])]
     return bool(votes) and (sorted(votes)[len(votes) // 2] == (lanes[0]["k"] > 0))
-
-
-def _conditions(row: dict) -> FilletConditions:
-    return FilletConditions(speed_mps=row["speed_mps"], blunt_first=row["leading_end"] == "blunt",
-                            turn_deg=row["turn_deg"], length_m=row["length_m"])
 
 
 def markdown_table(figures: list[SettingFigures]) -> str:
