@@ -15,6 +15,7 @@ import pytest
 import yaml
 from fixtures.rosbag2_conformance import assert_rosbag2_conformant, clock_span_ns
 
+from woody_tools.line_run import RunRefused
 from woody_tools.processes import entry_point, lease_domain
 
 pytestmark = pytest.mark.ros
@@ -102,6 +103,20 @@ def test_a_plant_camera_is_rendered_as_its_file_describes_and_the_vision_grades_
                                                    setup.stdout).groups())
     assert (tilt, roll, yaw) == pytest.approx((5.0, 3.0, -2.0), abs=0.5)
     assert params.with_suffix(".png").stat().st_size > 1000
+    # and grade through that setup alone: the line puts the found mount on tf_static, not the camera's own
+    again = tmp_path / "again"
+    result = woody_run("--fillets", "6", "--k", "0", "100", "--seed", "5", "--top-camera", str(camera),
+                       "--vision-setup", str(params), "--out", str(again), timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    rows = list(csv.DictReader((again / "verdicts.csv").open()))
+    assert len(rows) == 6 and all(r["verdict"] == r["truth"] for r in rows), rows
+    mount = found["/**/line_sim"]["ros__parameters"]["top_camera_mount"]
+    with (again / "line.mcap").open("rb") as f:
+        tf = next(msg for _, _, _, msg in make_reader(f, decoder_factories=[DecoderFactory()])
+                  .iter_decoded_messages(topics=["/tf_static"]))
+    (top,) = [t for t in tf.transforms if t.child_frame_id == "top_camera_optical_frame"]
+    t, q = top.transform.translation, top.transform.rotation
+    assert [t.x, t.y, t.z, q.x, q.y, q.z, q.w] == pytest.approx(mount, abs=1e-5)
 
 
 def test_outside_the_calibrated_speeds_no_woody_fillet_is_graded_normal(tmp_path):
@@ -294,6 +309,8 @@ def test_a_run_on_an_exported_domain_with_other_nodes_refuses(tmp_path):
     (["--threshold", "0"], "--threshold must be in [0.001, 1000], got 0"),
     (["--top-camera", "wide"], "--top-camera: unknown top camera preset 'wide'"),
     (["--top-camera", "/nonexistent/mine.yaml"], "--top-camera: camera file /nonexistent/mine.yaml: cannot read it"),
+    (["--vision-setup", "/nonexistent/params.yaml"], "--vision-setup /nonexistent/params.yaml: not a woody camera "
+                                                     "setup parameters file"),
 ])
 def test_bad_line_options_are_refused_before_any_node_starts(tmp_path, args, message):
     result = woody_run("--fillets", "1", "--out", str(tmp_path / "run"), *args, timeout=60)
@@ -337,6 +354,23 @@ def test_defaults_keep_the_tidy_line_and_a_paper_threshold_goes_to_the_paper_rul
     assert "line_threshold" not in params["grader"]
     for speed in ("90", "140"):  # any speed of a real line
         assert _parameters("--speed-fpm", speed)["line_sim"]["line_speed_fpm"] == float(speed)
+
+
+SETUP = {"/**/segmenter": {"ros__parameters": {"lanes": 3, "camera_height_m": 0.701, "lane_pitch_m": 0.159,
+                                               "depth_unit_m": 0.001}},
+         "/**/grader": {"ros__parameters": {"lanes": 3, "camera_height_m": 0.701, "roller_edge_offset_m": 0.182}},
+         "/**/line_sim": {"ros__parameters": {"top_camera_mount": [-0.18, -0.05, 0.7, 0.718, 0.694, 0.05, 0.012]}}}
+
+
+def test_a_camera_setup_replaces_the_simulators_own_values_for_the_vision_and_the_published_mount(tmp_path):
+    setup = tmp_path / "params.yaml"
+    setup.write_text(yaml.safe_dump(SETUP))
+    params = _parameters("--vision-setup", str(setup))
+    assert params["segmenter"]["camera_height_m"] == 0.701 and params["segmenter"]["lane_pitch_m"] == 0.159
+    assert params["grader"]["roller_edge_offset_m"] == 0.182
+    assert params["line_sim"]["top_camera_mount"] == SETUP["/**/line_sim"]["ros__parameters"]["top_camera_mount"]
+    with pytest.raises(RunRefused, match="found 3 lanes; the line has --lanes 6"):
+        _parameters("--vision-setup", str(setup), "--lanes", "6")
 
 
 def test_a_camera_file_sets_line_sims_camera_its_error_model_and_the_segmenters_depth_unit():

@@ -102,6 +102,9 @@ class LineSim(Node):
         super().__init__("line_sim")
         p = self._declare_parameters()
         p.__dict__.update(vars(self._declare_line(p.lanes, p.speed_fpm)))
+        self.geometry = LineGeometry(lanes=p.lanes, lane_pitch=p.pitch, side_lane=p.side_lane,
+                                     **top_camera_preset(p.top_camera))
+        self.top_mount = self._declare_top_mount()
         check_overrides(self)  # an unknown parameter is refused before any physics or render process starts
         self._build_line(p)
         self._create_interfaces(p)
@@ -208,6 +211,18 @@ class LineSim(Node):
                                       "deviation of a random part of the colour stamps' offset (s).", 0.0, 0.1)
         return top_camera, top_rate
 
+    def _declare_top_mount(self) -> tuple[np.ndarray, np.ndarray]:
+        """The top camera's pose the line puts on tf_static: by default the rendered camera's own; given, what a
+        plant's installer measured (``woody camera setup`` writes it), so the vision is set up as on a real line."""
+        camera = self.geometry.top_camera()
+        own = [float(c) for c in (*camera.position, *Rotation.from_matrix(camera.rotation).as_quat())]
+        mount = declare(self, "top_camera_mount", own, "The top camera's pose published on tf_static, [x, y, z, "
+                        "qx, qy, qz, qw] in the world frame (m); default the rendered camera's own. The camera "
+                        "is rendered where top_camera puts it either way.")
+        if len(mount) != 7 or abs(float(np.linalg.norm(mount[3:])) - 1.0) > 1e-3:
+            raise ValueError(f"top_camera_mount must be [x, y, z, qx, qy, qz, qw] with a unit quaternion, got {mount}")
+        return np.asarray(mount[:3], dtype=float), Rotation.from_quat(mount[3:]).as_matrix()
+
     def _declare_start_gate(self) -> None:
         """What the line waits for before its first step: the graph that consumes it."""
         self.wait_subscribers = declare(self, "wait_for_subscribers", 0, "Hold the simulation until this many "
@@ -272,10 +287,8 @@ class LineSim(Node):
                                change_at=change_at)
 
     def _build_line(self, p: SimpleNamespace) -> None:
-        """The simulated line: geometry, physics world, renderer, mesh set, spawn schedule."""
+        """The simulated line on ``self.geometry``: physics world, renderer, mesh set, spawn schedule."""
         self.speed = fpm_to_mps(p.speed_fpm)
-        self.geometry = LineGeometry(lanes=p.lanes, lane_pitch=p.pitch, side_lane=p.side_lane,
-                                     **top_camera_preset(p.top_camera))
         config = PhysicsConfig(**p.physics, damping=p.damping, friction_static=p.mu_static,
                                friction_dynamic=p.mu_dynamic)
         self.world = (SplitLineWorld(self.geometry, config, p.workers, start_method=CHILD_START)
@@ -335,7 +348,7 @@ class LineSim(Node):
         self.tf_static_pub = self.create_publisher(TFMessage, topics.TF_STATIC, tf_static)
         self._line_publishers = [self.clock_pub, self.truth_pub, self.color_pub, self.depth_pub, self.color_info_pub,
                                  self.depth_info_pub, self.side_pub, self.side_info_pub, self.tf_static_pub]
-        self.tf_static_pub.publish(static_transforms(self.geometry))
+        self.tf_static_pub.publish(static_transforms(self.geometry, self.top_mount))
         self.pacers: dict[str, LeadLimiter] = {}
         """Consumers the line keeps within max_lead_s of: the segmenter's tracks and, when waited for, the
         recorder's written clock."""
@@ -611,13 +624,14 @@ def _transform(child: str, position, rotation) -> TransformStamped:
     return transform
 
 
-def static_transforms(geometry: LineGeometry) -> TFMessage:
-    """The line's fixed frames for /tf_static: the roller axle and both cameras' optical frames in the world."""
+def static_transforms(geometry: LineGeometry, top_mount: tuple[np.ndarray, np.ndarray] | None = None) -> TFMessage:
+    """The line's fixed frames for /tf_static: the roller axle, the top camera's optical frame (at ``top_mount``,
+    position and rotation, if given) and the side camera's in the world."""
     axle_x, axle_z = geometry.roller_axle
-    transforms = [_transform(topics.ROLLER_FRAME, (axle_x, 0.0, axle_z), np.eye(3))]
-    for frame, camera in ((topics.TOP_FRAME, geometry.top_camera()), (topics.SIDE_FRAME, geometry.side_camera())):
-        transforms.append(_transform(frame, camera.position, camera.rotation))
-    return TFMessage(transforms=transforms)
+    top, side = geometry.top_camera(), geometry.side_camera()
+    return TFMessage(transforms=[_transform(topics.ROLLER_FRAME, (axle_x, 0.0, axle_z), np.eye(3)),
+                                 _transform(topics.TOP_FRAME, *(top_mount or (top.position, top.rotation))),
+                                 _transform(topics.SIDE_FRAME, side.position, side.rotation)])
 
 
 def _camera_info(camera, frame_id: str) -> CameraInfo:

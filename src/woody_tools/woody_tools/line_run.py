@@ -331,7 +331,7 @@ def node_parameters(args: argparse.Namespace, fillets: int | None, out: Path) ->
     # losing the frame (side passages beside two busy processes came whole 3 of 3 times, against 1 of 3)
     vision_params: dict[str, object] = {"use_sim_time": True, "lanes": args.lanes, "camera_height_m": camera_height,
                                         "image_qos": "reliable"}
-    return {
+    params = {
         "recorder": {"use_sim_time": True, "output": str(out / "line.mcap"),
                      "run_settings": json.dumps(run_settings(args, fillets)), **_recorded(args.namespace)},
         "segmenter": dict(vision_params, lane_pitch_m=args.lane_pitch_m,
@@ -344,6 +344,9 @@ def node_parameters(args: argparse.Namespace, fillets: int | None, out: Path) ->
         **({"foxglove_view": {"use_sim_time": True, "port": args.live}} if args.live is not None else {}),
         "line_sim": _sim_params(args, fillets),
     }
+    for name, given in args.vision_setup.items():  # woody camera setup's values win over the simulator's
+        params[name].update(given)
+    return params
 
 
 def _start_nodes(args: argparse.Namespace, fillets: int | None, out: Path, domain_id: int) -> list[NodeProcess]:

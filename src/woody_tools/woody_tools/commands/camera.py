@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     transform = _static_transform(found, args.frame_id or frame_id)
-    out.write_text(_parameters_yaml(found, transform))
+    out.write_text(_parameters_yaml(found, transform, args.depth_unit_m))
     picture = out.with_suffix(".png")
     cv2.imwrite(str(picture), _picture(camera, frames[0][1], found))
     for line in _report(found, len(frames)):
@@ -122,22 +122,32 @@ def _report(found, frames: int) -> list[str]:
     ]
 
 
+def _mount(found) -> list[float]:
+    """The found camera pose as [x, y, z, qx, qy, qz, qw] in the belt frame."""
+    return [round(float(c), 5) for c in (*found.pose.translation, *Rotation.from_matrix(found.pose.rotation).as_quat())]
+
+
 def _static_transform(found, frame_id: str) -> str:
-    x, y, z = found.pose.translation
-    qx, qy, qz, qw = Rotation.from_matrix(found.pose.rotation).as_quat()
+    x, y, z, qx, qy, qz, qw = _mount(found)
     return (f"ros2 run tf2_ros static_transform_publisher --x {x:.4f} --y {y:.4f} --z {z:.4f} --qx {qx:.5f} "
             f"--qy {qy:.5f} --qz {qz:.5f} --qw {qw:.5f} --frame-id {topics.WORLD_FRAME} --child-frame-id "
             f"{frame_id or 'CAMERA_OPTICAL_FRAME'}")
 
 
-def _parameters_yaml(found, transform: str) -> str:
+def _parameters_yaml(found, transform: str, depth_unit_m: float) -> str:
+    """The segmenter's and grader's parameters; line_sim's, for the twin, publish the found mount on tf_static
+    (``woody run --vision-setup``), as the static_transform_publisher line does on a real line."""
     pitch = found.lane_pitch_m if math.isfinite(found.lane_pitch_m) else 0.16
     vision = {"lanes": found.lanes, "camera_height_m": round(found.height_m, 4)}
-    params = {"/**/segmenter": {"ros__parameters": {**vision, "lane_pitch_m": round(pitch, 4)}},
-              "/**/grader": {"ros__parameters": {**vision, "roller_edge_offset_m": round(found.edge_offset_m, 4)}}}
+    params = {"/**/segmenter": {"ros__parameters": {**vision, "lane_pitch_m": round(pitch, 4),
+                                                    "depth_unit_m": depth_unit_m}},
+              "/**/grader": {"ros__parameters": {**vision, "roller_edge_offset_m": round(found.edge_offset_m, 4)}},
+              "/**/line_sim": {"ros__parameters": {"top_camera_mount": _mount(found)}}}
     header = "".join(f"# {line}\n" for line in ["written by woody camera setup", *_report(found, 0)[1:],
                                                  "the camera's pose for tf_static (the nodes take the mount from it):",
-                                                 f"  {transform}"])
+                                                 f"  {transform}",
+                                                 "line_sim's top_camera_mount puts the same pose on the twin's "
+                                                 "tf_static (woody run --vision-setup)"])
     return header + yaml.safe_dump(params, sort_keys=False)
 
 

@@ -14,6 +14,8 @@ import re
 import sys
 from pathlib import Path
 
+import yaml
+
 from woody_common.calibration import ENV_VAR, resolve_calibration, resolved_calibration
 from woody_common.line import (
     CLASS_K,
@@ -79,6 +81,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--calibration", default=None, metavar="FILE",
                         help="calibration file given to line_sim and the grader as a ROS params file "
                              f"(default ${ENV_VAR}, else the installed config/calibration.yaml)")
+    parser.add_argument("--vision-setup", dest="vision_setup_file", default=None, metavar="PARAMS.yaml",
+                        help="the parameters `woody camera setup` wrote from a recording of this camera: the "
+                             "segmenter and grader take their lanes, pitch, height and edge from it, and line_sim "
+                             "puts its mount on tf_static, instead of the simulator's own values")
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
     parser.add_argument("--sensor", default=None, choices=sorted(PRESETS),
                         help="top camera error model (docs/sensors.md); default: the camera file's, else ideal")
@@ -179,6 +185,30 @@ def _validate(args: argparse.Namespace) -> None:
     _validate_grading(args)
     _validate_calibration(args)
     _validate_top_camera(args)
+    _validate_vision_setup(args)
+
+
+VISION_SETUP_NODES = ("segmenter", "grader", "line_sim")
+"""The nodes a ``woody camera setup`` parameters file sets."""
+
+
+def _validate_vision_setup(args: argparse.Namespace) -> None:
+    """Read ``--vision-setup`` into ``args.vision_setup`` (node name -> its parameters; empty without it), refusing
+    a file that is not a setup of this line."""
+    args.vision_setup = {}
+    if args.vision_setup_file is None:
+        return
+    try:
+        loaded = yaml.safe_load(Path(args.vision_setup_file).read_text())
+        params = {name: dict(loaded[f"/**/{name}"]["ros__parameters"]) for name in VISION_SETUP_NODES}
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as exc:
+        raise RunRefused(f"--vision-setup {args.vision_setup_file}: not a woody camera setup parameters file "
+                         f"({type(exc).__name__}: {exc})") from None
+    found = params["segmenter"].get("lanes")
+    if found != args.lanes:
+        raise RunRefused(f"--vision-setup {args.vision_setup_file} found {found} lanes; the line has --lanes "
+                         f"{args.lanes}")
+    args.vision_setup = params
 
 
 def _validate_top_camera(args: argparse.Namespace) -> None:
