@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from woody_sim.sensor_model import PRESETS, SensorModel, sensor_preset, to_message_array
-from woody_vision.segmentation import BackgroundModel, segment_depth
+from woody_vision.segmentation import REAL_CAMERA_FILTERS, BackgroundModel, SegmentationParams, segment_depth
 
 STEREO = sensor_preset("stereo")
 STRUCTURED = sensor_preset("structured_light")
@@ -74,7 +74,8 @@ def test_drops_and_colour_noise_at_their_rates():
 
 
 @pytest.mark.parametrize("model", [STEREO, STRUCTURED], ids=lambda m: m.name)
-def test_a_noisy_empty_belt_is_never_a_fillet(model):
+def test_a_noisy_empty_belt_is_never_a_fillet_with_the_real_camera_filters(model):
+    params = SegmentationParams(**REAL_CAMERA_FILTERS)
     rng = np.random.default_rng(4)
     exact = flat(0.75, (376, 672))
     exact[300:] = 1.35  # the floor beyond the roller edge
@@ -82,7 +83,7 @@ def test_a_noisy_empty_belt_is_never_a_fillet(model):
     for _ in range(5):
         background.add(model.depth(exact, rng))
     for _ in range(20):
-        assert segment_depth(model.depth(exact, rng), background.depth) == []
+        assert segment_depth(model.depth(exact, rng), background.depth, params) == []
 
 
 def test_published_encodings_and_bad_models():

@@ -16,8 +16,9 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
-HELD_DEPTH_FRAMES = 2
-"""Depth frames that wait for a colour frame at most: colour may arrive up to two depth frames late."""
+HELD_DEPTH_FRAMES = 4
+"""Depth frames that wait for a colour frame at most: colour may arrive up to four depth frames late (line_sim's own
+colour frames reach a subscriber up to four depth frames after their depth frame on a busy 2-core machine)."""
 COLOR_FRAMES_KEPT = 10
 """Unused colour frames kept (the oldest goes first)."""
 INTERVAL_STEPS = 15

@@ -30,17 +30,19 @@ import numpy as np
 
 from woody_vision.flood import flood
 
-DEFAULT_HEIGHT_THRESHOLD_M = 0.002
+DEFAULT_HEIGHT_THRESHOLD_M = 0.0005
 """Pixels rising more than this above the learned background belong to a fillet. Kept below the thickness of a
 fillet's thin rim: on the belt, rim thinner than the threshold is not segmented, but past the roller edge the
 background is the floor and the same rim is, so a high threshold makes the outline grow as the fillet crosses
-the edge whether it bends or not (5 mm gave stiff real meshes a k-independent Φ of about 2; 2 mm about 1)."""
+the edge whether it bends or not (5 mm gave stiff real meshes a k-independent Φ of about 2; 2 mm about 1, and
+the stiff class a line score 1.8 times its 0.5 mm one). The ideal camera has no depth noise to stay above; a
+real one does (REAL_CAMERA_FILTERS)."""
 DEFAULT_MIN_AREA_PX = 500
 """Blobs smaller than this are noise or slivers, never a fillet (paper: 500 px)."""
 REAL_CAMERA_FILTERS = {"fill_invalid_px": 4, "median_px": 5, "blur_px": 1.0, "height_threshold_m": 0.005,
                        "color_threshold": 20.0, "color_search_px": 8}
 """The hole filling and smoothing recommended for a real (or modelled) camera (docs/real-camera.md); the
-height threshold goes back to 5 mm, since a 2 mm cut sits inside a real sensor's ~2 mm depth noise, and the
+height threshold goes back to 5 mm, since a lower cut sits inside a real sensor's ~2 mm depth noise, and the
 outline comes from the registered colour image (20 levels: several times a camera's colour noise, well under
 the fillet-to-belt contrast; docs/sensors.md, "Robustness")."""
 
