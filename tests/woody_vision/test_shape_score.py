@@ -255,8 +255,8 @@ def test_window_opens_at_the_rigid_front_and_closes_at_the_virtual_centroid():
     opens = next(i for i, t in enumerate(trailing) if t + reference.length_px >= EDGE)
     closes = next(i for i, t in enumerate(trailing) if t + reference.centroid_offset_px >= EDGE)
     assert opens > reference_index + 2 and closes > opens + 2
-    index, result, _ = run_evaluator(flat)
-    assert index == closes and result.stamp == pytest.approx(closes / FPS)
+    index, result, _ = run_evaluator(flat)  # decided on the frame after it closes, which confirms the closing one
+    assert index == closes + 1 and result.stamp == pytest.approx((closes + 1) / FPS)
     assert result.frames == closes - opens + 1
     assert [f.stamp for f in result.trace] == pytest.approx([i / FPS for i in range(opens, closes + 1)])
     assert result.reference_stamp == pytest.approx(reference_index / FPS)
@@ -265,7 +265,27 @@ def test_window_opens_at_the_rigid_front_and_closes_at_the_virtual_centroid():
     # the virtual centroid follows the flat trailing edge plus the offset locked while flat.
     bent = translating(80, bend=foreshorten(0.4))
     index_bent, result_bent, _ = run_evaluator(bent)
-    assert index_bent == closes and result_bent.status == STATUS_SCORED and result_bent.phi > 1.0
+    assert index_bent == closes + 1 and result_bent.status == STATUS_SCORED and result_bent.phi > 1.0
+
+
+def test_the_frame_past_the_measuring_point_sets_the_score_only_once_a_later_frame_confirms_it():
+    """A stiff fillet whose outline is wrong in the first frame past its measuring point (a neighbour's outline
+    joined the hanging part): the next frame caps it, so the score is the clean frames'. A track that ends on
+    that frame is scored on the frames it has."""
+    contours = translating(80)
+    index, clean, _ = run_evaluator(contours)
+    past = index - 1
+    spoiled = list(contours)
+    spoiled[past] = translating(80, bend=foreshorten(0.3))[past]
+    index_spoiled, result, _ = run_evaluator(spoiled)
+    raw = interpolate_at(list(result.trace + result.extra_trace), clean.line_fraction)[0]
+    assert raw > clean.line_phi + 1.0, "precondition: the spoiled frame sets the score unconfirmed"
+    assert index_spoiled == index and result.line_phi == pytest.approx(clean.line_phi, abs=0.05)
+
+    ended = ShapeEvaluator(EDGE)
+    assert all(ended.update(contour, i / FPS) is None for i, contour in enumerate(spoiled[: past + 1]))
+    result = ended.finish()
+    assert result.status == STATUS_SCORED and result.line_phi == pytest.approx(raw)
 
 
 def test_the_flat_part_overlaps_its_reference_moved_with_the_belt_unless_cut_or_joined():

@@ -51,8 +51,10 @@ found between the two frames around it, on the rising envelope of Φ_t (each
 frame capped by the lowest later frame, :func:`rising_envelope`): a fillet only
 bends further as it tips, and a frame a neighbour's outline joined stands above
 the frames after it. The evaluator keeps scoring past the
-centroid crossing until that moment is passed (a fillet sent blunt end first
-has its centroid ahead of mid-body, so its window closes earlier). It also
+centroid crossing until that moment is passed and one frame more has confirmed
+the frame past it (a fillet sent blunt end first has its centroid ahead of
+mid-body, so its window closes earlier); a track that ends before that frame
+is scored on the frames it has. It also
 reports what the decision may depend on, all measured on the reference
 outline and the approach: the fillet's speed in the image, which end leads
 (:func:`leading_end`), how far it lies turned from the flow
@@ -543,9 +545,15 @@ class ShapeEvaluator:
             if overshoot >= 0.0 and overshoot > GAP_FRAMES * self._advance_per_frame():
                 return self._finish(STATUS_UNSCORED, REASON_LATE_CLOSE.format(overshoot))
             self._closed = overshoot >= 0.0
-        if self._closed and overhang >= self.line_fraction:
+        if self._closed and self._confirmed():
             return self._finish_line()
         return None
+
+    def _confirmed(self) -> bool:
+        """Whether a frame has followed the first one at or past the measuring point: the rising envelope caps that
+        frame by a later one, so a neighbour that joined its outline there does not set the score."""
+        frames = self._trace + self._extra
+        return len(frames) >= 2 and frames[-2].overhang >= self.line_fraction
 
     def _note_gap(self) -> None:
         """Remember the step into this window frame if frames were lost before it."""
@@ -594,7 +602,7 @@ class ShapeEvaluator:
         if self._phase is _Phase.DONE:
             return None
         if self._closed:
-            return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
+            return self._finish_line()  # scored on the frames around the measuring point, if it was passed
         reason = REASON_LOST_IN_WINDOW if self._trace else REASON_LOST_BEFORE_EDGE
         return self._finish(STATUS_UNSCORED, reason)
 
