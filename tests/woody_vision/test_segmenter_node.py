@@ -120,6 +120,35 @@ def test_the_colour_outline_answers_every_depth_frame_once_in_order_when_the_col
            "one within the tolerance, ±16.7 ms)" in summary, summary
 
 
+def colour_late(frames: list, late: int) -> list:
+    """The frames with each colour image delivered after the depth frame ``late`` frames after its own."""
+    depth_seen, waiting, out = 0, [], []
+    for topic, msg in frames:
+        if topic == COLOUR:
+            waiting.append((depth_seen + late, (topic, msg)))
+            continue
+        out.append((topic, msg))
+        if topic == DEPTH:
+            depth_seen += 1
+            out += [frame for due, frame in waiting if due <= depth_seen]
+            waiting = [(due, frame) for due, frame in waiting if due > depth_seen]
+    return out + [frame for _, frame in waiting]
+
+
+@pytest.mark.parametrize("wait, paired", [(HELD_DEPTH_FRAMES, False), (8, True)])
+def test_colour_frames_late_pair_with_their_depth_frames_within_color_wait_frames(segmenter, capsys, wait, paired):
+    """A driver whose colour arrives six depth frames after its depth frame: ``color_wait_frames`` 8 pairs every
+    depth frame whose colour came, the default 4 has to decide them before their colour comes and skips them."""
+    node, published = segmenter(color_threshold=20.0, color_wait_frames=wait)
+    given = list(feed(node, colour_late(sample_frames(20), late=6), colour_until=20))
+    node.close()
+    summary = capsys.readouterr().out
+    assert ("20 depth frames received, 0 rejected, 0 skipped without their colour frame" in summary) == paired, \
+        summary
+    if paired:  # the last six wait for colour the feed never delivers
+        assert answered(published) == given[:14]
+
+
 def shifted(bag: Path, offset_ms: int) -> tuple[Path, list[int]]:
     """The sample's top-camera topics and /clock up to CUT_S of sim time, each colour image stamped ``offset_ms``
     from its depth frame; the bag and its depth stamps."""

@@ -19,6 +19,8 @@ from typing import Any
 HELD_DEPTH_FRAMES = 4
 """Depth frames that wait for a colour frame at most: colour may arrive up to four depth frames late (line_sim's own
 colour frames reach a subscriber up to four depth frames after their depth frame on a busy 2-core machine)."""
+MAX_HELD_DEPTH_FRAMES = 30
+"""The most depth frames a pairing holds: a second of a 30 Hz camera (the segmenter's ``color_wait_frames``)."""
 COLOR_FRAMES_KEPT = 10
 """Unused colour frames kept (the oldest goes first)."""
 INTERVAL_STEPS = 15

@@ -49,7 +49,7 @@ from woody_vision import segmentation
 from woody_vision.belt_view import BeltView, CameraModel, straight_down_pose
 from woody_vision.camera_model import LaneLayout, belt_outline
 from woody_vision.frame_checks import FrameChecker, FrameError, SimTimeWatch, watch_clock
-from woody_vision.frame_pairing import FramePairing, Pair
+from woody_vision.frame_pairing import HELD_DEPTH_FRAMES, MAX_HELD_DEPTH_FRAMES, FramePairing, Pair
 from woody_vision.image_encodings import color_rgb, depth_metres, match_size
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.mount_watch import MountWatch
@@ -85,6 +85,9 @@ class Segmenter(Node):
         sync = declare(self, "color_sync_tolerance_s", 0.0, "With color_threshold: a depth frame takes the colour "
                        "frame nearest its stamp within this (s); 0 = half the depth stream's frame interval, measured "
                        "(median of its recent stamp steps), so it fits a camera of any rate.", 0.0, 1.0)
+        wait = declare(self, "color_wait_frames", HELD_DEPTH_FRAMES, "With color_threshold: depth frames that wait "
+                       "for a late colour frame at most (a driver whose colour lags depth by N frames needs N).", 1,
+                       MAX_HELD_DEPTH_FRAMES)
         self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
         self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Lane centre to centre (m).", *LANE_PITCH_RANGE_M)
         self.max_fillet_width = declare(self, "max_fillet_width_m", MAX_FILLET_WIDTH_M, "A blob wider across the "
@@ -114,7 +117,7 @@ class Segmenter(Node):
         self.latest_color: Image | None = None
         self.scores: dict[int, str] = {}
         self.info_size: tuple[int, int] | None = None
-        self.pairing = FramePairing(sync) if self.params.color_threshold else None  # None: depth only, never waits
+        self.pairing = FramePairing(sync, wait) if self.params.color_threshold else None  # None: depth only
         self.without_color = 0
         self.frames = 0
         self.tracked = 0
