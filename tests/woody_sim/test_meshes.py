@@ -21,6 +21,7 @@ from woody_sim.meshes import (
     generate_fillet,
     load_mesh,
     load_mesh_set,
+    rasterize_top,
     scan_height,
     scan_to_depth_map,
     scan_to_fillet,
@@ -87,6 +88,22 @@ def test_generated_top_surface_never_folds_over() -> None:
 def test_generated_rims_are_smooth_not_stair_stepped() -> None:
     for seed in range(3):
         assert describe(generate_fillet(seed)).rim_roughness < 1.06
+
+
+@pytest.mark.parametrize("winding", [(0, 1, 2), (0, 2, 1)])
+def test_the_height_map_is_the_upper_envelope_at_every_pixel_centre_for_either_winding(winding) -> None:
+    """A square pyramid over a flat base (apex 2 cm over a 4 cm square) seen from above: the height at each pixel
+    centre is the pyramid's, the base under it never shows, and outside the footprint is 0."""
+    base = [(-0.02, -0.02, 0.0), (0.02, -0.02, 0.0), (0.02, 0.02, 0.0), (-0.02, 0.02, 0.0)]
+    vertices = np.array([*base, (0.0, 0.0, 0.02)])
+    faces = np.array([(0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4), (0, 2, 1), (0, 3, 2)])[:, list(winding)]
+    height_map = rasterize_top(vertices, faces, 0.001)
+    rows, cols = np.indices(height_map.heights.shape)
+    x, y = height_map.x0 + cols * 0.001, height_map.y0 + rows * 0.001
+    pyramid = np.maximum(0.02 - np.maximum(np.abs(x), np.abs(y)), 0.0)
+    assert height_map.heights.shape == (43, 43)
+    np.testing.assert_allclose(height_map.heights, np.where(np.maximum(np.abs(x), np.abs(y)) <= 0.02 + 1e-12,
+                                                             pyramid, 0.0), atol=1e-12)
 
 
 def test_a_yawed_fillet_is_the_same_fillet_turned_on_the_belt(references: list[FilletMesh]) -> None:

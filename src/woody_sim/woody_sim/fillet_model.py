@@ -100,9 +100,10 @@ def volume_masses(volumes: np.ndarray, total_mass: float) -> np.ndarray:
     return total_mass * share / share.sum()
 
 
-def _section(height_map: HeightMap, x: float, rows: int) -> tuple[np.ndarray, np.ndarray]:
-    """Top profile (y, z) of the fillet at one x, as ``rows`` points from one edge to the other."""
-    interval = height_map.footprint_interval(x)
+def _section(height_map: HeightMap, x: float, interval: tuple[float, float] | None,
+             rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """Top profile (y, z) of the fillet at one x (its footprint ``interval`` there), as ``rows`` points from one
+    edge to the other."""
     if interval is None or interval[1] - interval[0] < MIN_WIDTH:
         centre = 0.0 if interval is None else 0.5 * (interval[0] + interval[1])
         interval = (centre - MIN_WIDTH / 2.0, centre + MIN_WIDTH / 2.0)
@@ -169,7 +170,8 @@ def build_fillet_model(
     x_min, x_max = fillet.mesh.bounds[:, 0]
     edges = np.linspace(x_min, x_max, n_segments + 1)
     station_x = np.linspace(x_min, x_max, n_segments * visual_stations + 1)
-    sections = [_section(hm, x, visual_rows) for x in station_x]
+    sections = [_section(hm, x, interval, visual_rows)
+                for x, interval in zip(station_x, hm.footprint_intervals(station_x))]
     centers = np.zeros((n_segments, 3))
     half = np.zeros((n_segments, 3))
     for i in range(n_segments):
@@ -179,12 +181,13 @@ def build_fillet_model(
         y_lo = min(ys[0] for ys, _ in own)
         y_hi = max(ys[-1] for ys, _ in own)
         top = max(zs.max() for _, zs in own)
-        for x in np.linspace(a, b, max(3, int(np.ceil((b - a) / hm.pixel)) + 1)):
-            interval = hm.footprint_interval(x)
-            if interval is not None:
-                y_lo, y_hi = min(y_lo, interval[0]), max(y_hi, interval[1])
-                ys = np.linspace(interval[0], interval[1], 4 * visual_rows)
-                top = max(top, float(hm.sample(np.full(ys.size, x), ys).max()))
+        xs = np.linspace(a, b, max(3, int(np.ceil((b - a) / hm.pixel)) + 1))
+        found = [(x, interval) for x, interval in zip(xs, hm.footprint_intervals(xs)) if interval is not None]
+        if found:
+            ends = np.array([interval for _, interval in found])
+            y_lo, y_hi = min(y_lo, float(ends[:, 0].min())), max(y_hi, float(ends[:, 1].max()))
+            ys = np.linspace(ends[:, 0], ends[:, 1], 4 * visual_rows, axis=1)
+            top = max(top, float(hm.sample(np.array([x for x, _ in found])[:, None], ys).max()))
         centers[i] = (0.5 * (a + b), 0.5 * (y_lo + y_hi), 0.5 * top)
         half[i] = (0.5 * (b - a), 0.5 * (y_hi - y_lo), 0.5 * top)
     masses = volume_masses(slab_volumes(hm, edges), float(total_mass))

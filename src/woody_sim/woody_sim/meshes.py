@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
+import numba
 import numpy as np
 import trimesh
 from scipy import interpolate, ndimage, spatial
@@ -97,17 +98,26 @@ class HeightMap:
 
     def footprint_interval(self, x: float, threshold: float = 1e-4) -> tuple[float, float] | None:
         """(y_min, y_max) of the footprint at one x, with sub-pixel edges; None where the fillet is absent."""
+        return self.footprint_intervals([x], threshold)[0]
+
+    def footprint_intervals(self, xs, threshold: float = 1e-4) -> list[tuple[float, float] | None]:
+        """:meth:`footprint_interval` at each of ``xs``, sampled in one pass."""
         lo, hi = self.y_range()
         ys = np.arange(lo, hi + 1e-12, self.pixel / 2.0)
-        h = self.sample(np.full_like(ys, x), ys) - threshold
-        inside = np.flatnonzero(h > 0.0)
-        if inside.size == 0:
-            return None
-        first, last = inside[0], inside[-1]
-        step = ys[1] - ys[0]
-        y_min = ys[first] if first == 0 else ys[first - 1] + step * h[first - 1] / (h[first - 1] - h[first])
-        y_max = ys[last] if last == ys.size - 1 else ys[last] + step * h[last] / (h[last] - h[last + 1])
-        return float(y_min), float(y_max)
+        heights = self.sample(np.asarray(xs, dtype=float)[:, None], ys[None, :]) - threshold
+        return [_interval(ys, h) for h in heights]
+
+
+def _interval(ys: np.ndarray, h: np.ndarray) -> tuple[float, float] | None:
+    """Where the heights ``h`` over ``ys`` are above 0, each end interpolated between samples; None if nowhere."""
+    inside = np.flatnonzero(h > 0.0)
+    if inside.size == 0:
+        return None
+    first, last = inside[0], inside[-1]
+    step = ys[1] - ys[0]
+    y_min = ys[first] if first == 0 else ys[first - 1] + step * h[first - 1] / (h[first - 1] - h[first])
+    y_max = ys[last] if last == ys.size - 1 else ys[last] + step * h[last] / (h[last] - h[last + 1])
+    return float(y_min), float(y_max)
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,9 +153,9 @@ class FilletMesh:
 def rasterize_top(vertices: np.ndarray, faces: np.ndarray, pixel: float) -> HeightMap:
     """Upper envelope of a triangle soup seen from +z, like a nadir depth camera.
 
-    Vectorised barycentric rasterisation (triangles grouped by their pixel
-    footprint), so it needs no ray-casting library and works for any winding.
-    Heights are measured from the lowest vertex.
+    Barycentric rasterisation of each triangle over the pixels of its bounding box, compiled: a placed fillet
+    of a messy line (turned, sized) needs its own height map, so this runs once per fillet on the line. It
+    needs no ray-casting library and works for any winding. Heights are measured from the lowest vertex.
     """
     vertices = np.asarray(vertices, dtype=float)
     z_min = vertices[:, 2].min()
@@ -154,36 +164,35 @@ def rasterize_top(vertices: np.ndarray, faces: np.ndarray, pixel: float) -> Heig
     nx = int(math.ceil((hi[0] - lo[0]) / pixel)) + 1
     ny = int(math.ceil((hi[1] - lo[1]) / pixel)) + 1
     tri = vertices[np.asarray(faces)]
-    u = (tri[:, :, 0] - lo[0]) / pixel
-    v = (tri[:, :, 1] - lo[1]) / pixel
-    z = tri[:, :, 2] - z_min
-    det = (u[:, 1] - u[:, 0]) * (v[:, 2] - v[:, 0]) - (u[:, 2] - u[:, 0]) * (v[:, 1] - v[:, 0])
-    i0 = np.ceil(u.min(axis=1)).astype(int)
-    i1 = np.floor(u.max(axis=1)).astype(int)
-    j0 = np.ceil(v.min(axis=1)).astype(int)
-    j1 = np.floor(v.max(axis=1)).astype(int)
-    size = np.maximum(i1 - i0, j1 - j0) + 1
-    usable = (np.abs(det) > 1e-12) & (i1 >= i0) & (j1 >= j0)
-    heights = np.full(nx * ny, -np.inf)
-    k_prev = 0
-    k = 1
-    while k_prev < (size[usable].max() if usable.any() else 0):
-        sel = np.flatnonzero(usable & (size > k_prev) & (size <= k))
-        if sel.size:
-            di, dj = np.meshgrid(np.arange(k), np.arange(k))
-            pu = i0[sel, None] + di.ravel()[None, :]
-            pv = j0[sel, None] + dj.ravel()[None, :]
-            uu, vv, d = u[sel], v[sel], det[sel, None]
-            w1 = ((pu - uu[:, :1]) * (vv[:, 2:3] - vv[:, :1]) - (uu[:, 2:3] - uu[:, :1]) * (pv - vv[:, :1])) / d
-            w2 = ((uu[:, 1:2] - uu[:, :1]) * (pv - vv[:, :1]) - (pu - uu[:, :1]) * (vv[:, 1:2] - vv[:, :1])) / d
-            w0 = 1.0 - w1 - w2
-            eps = 1e-9
-            inside = (w0 >= -eps) & (w1 >= -eps) & (w2 >= -eps) & (pu <= i1[sel, None]) & (pv <= j1[sel, None])
-            zz = w0 * z[sel, :1] + w1 * z[sel, 1:2] + w2 * z[sel, 2:3]
-            np.maximum.at(heights, (pv * nx + pu)[inside], zz[inside])
-        k_prev, k = k, k * 2
-    heights = np.where(np.isfinite(heights), np.maximum(heights, 0.0), 0.0).reshape(ny, nx)
+    u = np.ascontiguousarray((tri[:, :, 0] - lo[0]) / pixel)
+    v = np.ascontiguousarray((tri[:, :, 1] - lo[1]) / pixel)
+    z = np.ascontiguousarray(tri[:, :, 2] - z_min)
+    heights = np.full((ny, nx), -np.inf)
+    _upper_envelope(u, v, z, heights)
+    heights = np.where(np.isfinite(heights), np.maximum(heights, 0.0), 0.0)
     return HeightMap(heights=heights, x0=float(lo[0]), y0=float(lo[1]), pixel=float(pixel))
+
+
+@numba.njit(cache=True, nogil=True)
+def _upper_envelope(u: np.ndarray, v: np.ndarray, z: np.ndarray, heights: np.ndarray) -> None:
+    """Raise ``heights`` (ny, nx) to each triangle's height at every pixel centre inside it (on an edge within
+    1e-9 of a barycentric weight counts); u, v are pixel coordinates, (T, 3) each."""
+    ny, nx = heights.shape
+    eps = 1e-9
+    for t in range(u.shape[0]):
+        u0, u1, u2, v0, v1, v2 = u[t, 0], u[t, 1], u[t, 2], v[t, 0], v[t, 1], v[t, 2]
+        det = (u1 - u0) * (v2 - v0) - (u2 - u0) * (v1 - v0)
+        i0, i1 = int(math.ceil(min(u0, u1, u2))), int(math.floor(max(u0, u1, u2)))
+        j0, j1 = int(math.ceil(min(v0, v1, v2))), int(math.floor(max(v0, v1, v2)))
+        if abs(det) <= 1e-12 or i1 < i0 or j1 < j0:
+            continue
+        for j in range(max(j0, 0), min(j1, ny - 1) + 1):
+            for i in range(max(i0, 0), min(i1, nx - 1) + 1):
+                w1 = ((i - u0) * (v2 - v0) - (u2 - u0) * (j - v0)) / det
+                w2 = ((u1 - u0) * (j - v0) - (i - u0) * (v1 - v0)) / det
+                w0 = 1.0 - w1 - w2
+                if w0 >= -eps and w1 >= -eps and w2 >= -eps:
+                    heights[j, i] = max(heights[j, i], w0 * z[t, 0] + w1 * z[t, 1] + w2 * z[t, 2])
 
 
 # --------------------------------------------------------------------------- orientation
