@@ -82,12 +82,6 @@ class Segmenter(Node):
                                     "side by side where the tracker predicts them: fewer unscored fillets at the "
                                     "edge of a crowded line, more woody ones passed (docs/results.md)."),
         )
-        sync = declare(self, "color_sync_tolerance_s", 0.0, "With color_threshold: a depth frame takes the colour "
-                       "frame nearest its stamp within this (s); 0 = half the depth stream's frame interval, measured "
-                       "(median of its recent stamp steps), so it fits a camera of any rate.", 0.0, 1.0)
-        wait = declare(self, "color_wait_frames", HELD_DEPTH_FRAMES, "With color_threshold: depth frames that wait "
-                       "for a late colour frame at most (a driver whose colour lags depth by N frames needs N).", 1,
-                       MAX_HELD_DEPTH_FRAMES)
         self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
         self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Lane centre to centre (m).", *LANE_PITCH_RANGE_M)
         self.max_fillet_width = declare(self, "max_fillet_width_m", MAX_FILLET_WIDTH_M, "A blob wider across the "
@@ -117,12 +111,22 @@ class Segmenter(Node):
         self.latest_color: Image | None = None
         self.scores: dict[int, str] = {}
         self.info_size: tuple[int, int] | None = None
-        self.pairing = FramePairing(sync, wait) if self.params.color_threshold else None  # None: depth only
+        self.pairing = self._declare_pairing()
         self.without_color = 0
         self.frames = 0
         self.tracked = 0
         self._create_interfaces()
         self.diagnostics = DiagnosticsPublisher(self, self.health)
+
+    def _declare_pairing(self) -> FramePairing | None:
+        """How colour frames pair with depth frames, or None when the outline comes from depth only."""
+        sync = declare(self, "color_sync_tolerance_s", 0.0, "With color_threshold: a depth frame takes the colour "
+                       "frame nearest its stamp within this (s); 0 = half the depth stream's frame interval, measured "
+                       "(median of its recent stamp steps), so it fits a camera of any rate.", 0.0, 1.0)
+        wait = declare(self, "color_wait_frames", HELD_DEPTH_FRAMES, "With color_threshold: depth frames that wait "
+                       "for a late colour frame at most (a driver whose colour lags depth by N frames needs N).", 1,
+                       MAX_HELD_DEPTH_FRAMES)
+        return FramePairing(sync, wait) if self.params.color_threshold else None
 
     def _create_interfaces(self) -> None:
         """The tracks (and debug image) publisher and the camera, reset and verdict subscriptions."""
