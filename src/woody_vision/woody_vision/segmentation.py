@@ -76,6 +76,9 @@ class SegmentationParams:
     height_core_ratio: float = 0.75
     """Markers of a wide component split by height: its pixels higher than this × its highest pixel (two
     fillets' middles stay apart above three quarters of the thicker one's height, also when they overlap)."""
+    height_core_floor: float = 0.5
+    """The lowest cut tried for those markers when the first finds one fillet only: a fillet half as thick as
+    its neighbour rises above the saddle between them only below three quarters of the thicker one's height."""
     split_width_px: float = 0.0
     """Components wider than this across the flow (columns) are checked for fillets side by side by height
     (0 = off; the segmenter sets it from the camera and ``max_fillet_width_m``)."""
@@ -109,9 +112,9 @@ class SegmentationParams:
             raise ValueError(f"open_kernel_px must be >= 0, got {self.open_kernel_px}")
         if not 0.0 < self.split_solidity <= 1.0:
             raise ValueError(f"split_solidity must be in (0, 1], got {self.split_solidity}")
-        if not (0.0 < self.core_ratio < 1.0 and 0.0 < self.height_core_ratio < 1.0):
-            raise ValueError(f"core_ratio and height_core_ratio must be in (0, 1), got {self.core_ratio}, "
-                             f"{self.height_core_ratio}")
+        if not (0.0 < self.core_ratio < 1.0 and 0.0 < self.height_core_floor <= self.height_core_ratio < 1.0):
+            raise ValueError(f"core_ratio must be in (0, 1) and 0 < height_core_floor <= height_core_ratio < 1, got "
+                             f"{self.core_ratio}, {self.height_core_floor}, {self.height_core_ratio}")
         if not self.split_width_px >= 0.0:
             raise ValueError(f"split_width_px must be >= 0, got {self.split_width_px}")
         if self.color_threshold < 0 or self.color_search_px < 0:
@@ -360,19 +363,26 @@ def _split_by_height(component: np.ndarray, height: np.ndarray,
     """A wide component split into the fillets around its thick cores (height watershed), or None if it has one.
 
     Pixels higher than a fillet lying on the belt can be (past the roller edge the background is the floor) are
-    left out of the relief: the cores are the middles of the fillets still on the belt.
+    left out of the relief: the cores are the middles of the fillets still on the belt. The cores are cut from
+    the relief at ``height_core_ratio`` × its highest pixel first, then lower, down to ``height_core_floor``: a
+    thin fillet beside a thick one rises above a lower cut only.
     """
     relief = np.asarray(height, np.float32).copy()
     relief[(component == 0) | (relief > MAX_LYING_HEIGHT_M)] = 0.0
-    cores = cv2.compare(relief, params.height_core_ratio * float(relief.max()), cv2.CMP_GT)
+    top = float(relief.max())
+    for ratio in np.arange(params.height_core_ratio, params.height_core_floor - 1e-9, -CORE_RATIO_STEP):
+        markers, cores = _side_by_side_cores(cv2.compare(relief, float(ratio) * top, cv2.CMP_GT), params)
+        if len(cores) >= 2:
+            labels = _flood(relief, np.where(np.isin(markers, cores), markers, 0).astype(np.int32), component)
+            return _region_masks(labels, cores)
+    return None
+
+
+def _side_by_side_cores(cores: np.ndarray, params: SegmentationParams) -> tuple[np.ndarray, list[int]]:
+    """The cores' labels and those large enough to be a fillet's middle that lie beside another such core."""
     n_cores, markers, stats, _ = cv2.connectedComponentsWithStats(cores, connectivity=8, ltype=cv2.CV_32S)
     big = [c for c in range(1, n_cores) if stats[c, cv2.CC_STAT_AREA] * 8 >= params.min_area_px]
-    big = [c for c in big if any(_side_by_side(stats[c], stats[d]) for d in big if d != c)]
-    if len(big) < 2:
-        return None
-    markers = np.where(np.isin(markers, big), markers, 0).astype(np.int32)
-    labels = _flood(relief, markers, component)
-    return _region_masks(labels, big)
+    return markers, [c for c in big if any(_side_by_side(stats[c], stats[d]) for d in big if d != c)]
 
 
 def _split_by_priors(part: tuple[np.ndarray, np.ndarray | None], priors: Sequence[np.ndarray],
@@ -469,6 +479,8 @@ PRIOR_ERODE_PX = 5
 """The priors' pixels seed the split this far (kernel px) inside their outlines, off the contact."""
 SIDE_BY_SIDE_OVERLAP = 0.25
 """Two thick cores split a wide component only when they share this fraction of the shorter core's rows."""
+CORE_RATIO_STEP = 0.05
+"""Step between the cuts of :func:`_split_by_height` (× the component's highest pixel)."""
 MAX_LYING_HEIGHT_M = 0.1
 """No fillet lying on the belt is this thick; higher pixels are past the roller edge, over the floor."""
 NOTCH_DEPTH_RATIO = 0.1
