@@ -411,17 +411,17 @@ def test_fillets_side_by_side_reaching_past_the_roller_edge_are_split_by_their_m
 
 def test_a_thin_fillet_touching_a_thick_one_side_by_side_is_split_below_the_first_cut():
     """A 15 mm fillet beside a 27 mm one: no pixel of the thin one rises above 0.75 x the thick one's height, so
-    only a lower cut of the relief finds its middle, above the saddle where the two touch."""
+    only a lower cut of the relief (``height_core_floor``) finds its middle, above the saddle where they touch."""
     rows, cols = np.mgrid[0:200, 0:240]
     height = np.zeros((200, 240), np.float32)
     for centre, top in ((90.0, 0.015), (150.0, 0.027)):
         across, along = (cols - centre) / 31.0, (rows - 90.0) / 70.0
         inside = across ** 6 + along ** 6 < 1.0
         height = np.maximum(height, np.where(inside, 0.004 + top * np.sqrt(np.clip(1.0 - across ** 2, 0, 1)), 0.0))
-    params = SegmentationParams(split_width_px=80.0)
-    assert float(height[:, :120].max()) < params.height_core_ratio * float(height.max()), "precondition: thin"
-    assert len(segment_height_map(height, SegmentationParams(split_width_px=80.0, height_core_floor=0.75))) == 1
-    blobs = segment_height_map(height, params)
+    one_cut = SegmentationParams(split_width_px=80.0)
+    assert float(height[:, :120].max()) < one_cut.height_core_ratio * float(height.max()), "precondition: thin"
+    assert len(segment_height_map(height, one_cut)) == 1, "the default cut finds the thick one's middle only"
+    blobs = segment_height_map(height, SegmentationParams(split_width_px=80.0, height_core_floor=0.5))
     assert sorted(round(b.centroid[0] / 10) for b in blobs) == [9, 15]
 
 

@@ -61,6 +61,10 @@ class Blob:
     mean_height_m: float
 
 
+DEFAULT_HEIGHT_CORE_FLOOR = 0.75
+"""The lowest cut of a wide blob's relief tried by default: the first, 0.75 × its highest pixel, only."""
+
+
 @dataclass(frozen=True)
 class SegmentationParams:
     """Tuning of :func:`segment_height_map`; defaults follow the paper's top-down setup."""
@@ -76,9 +80,12 @@ class SegmentationParams:
     height_core_ratio: float = 0.75
     """Markers of a wide component split by height: its pixels higher than this × its highest pixel (two
     fillets' middles stay apart above three quarters of the thicker one's height, also when they overlap)."""
-    height_core_floor: float = 0.5
-    """The lowest cut tried for those markers when the first finds one fillet only: a fillet half as thick as
-    its neighbour rises above the saddle between them only below three quarters of the thicker one's height."""
+    height_core_floor: float = DEFAULT_HEIGHT_CORE_FLOOR
+    """The lowest cut tried for those markers when the first finds one fillet only (in steps of 0.05; the
+    default tries one cut): a fillet much thinner than its neighbour rises above the saddle between them only
+    below three quarters of the thicker one's height. Lower (0.5) splits more of the fillets that merge side by
+    side at the edge, so fewer are unscored, but the boundary it draws is a few pixels off and more woody
+    fillets pass (docs/results.md)."""
     split_width_px: float = 0.0
     """Components wider than this across the flow (columns) are checked for fillets side by side by height
     (0 = off; the segmenter sets it from the camera and ``max_fillet_width_m``)."""

@@ -53,7 +53,13 @@ from woody_vision.frame_pairing import HELD_DEPTH_FRAMES, MAX_HELD_DEPTH_FRAMES,
 from woody_vision.image_encodings import color_rgb, depth_metres, match_size
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.mount_watch import MountWatch
-from woody_vision.segmentation import DEFAULT_HEIGHT_THRESHOLD_M, BackgroundModel, SegmentationParams, segment_depth
+from woody_vision.segmentation import (
+    DEFAULT_HEIGHT_CORE_FLOOR,
+    DEFAULT_HEIGHT_THRESHOLD_M,
+    BackgroundModel,
+    SegmentationParams,
+    segment_depth,
+)
 from woody_vision.tracking import CentroidTracker
 
 
@@ -63,25 +69,7 @@ class Segmenter(Node):
     def __init__(self) -> None:
         super().__init__("segmenter")
         segmentation.warm_up()  # before any subscription: no frame waits for a compile
-        self.params = SegmentationParams(
-            height_threshold_m=declare(self, "height_threshold_m", DEFAULT_HEIGHT_THRESHOLD_M, "Height above the "
-                                       "belt background that counts as fillet (m).", 0.0005, 0.1),
-            min_area_px=declare(self, "min_area_px", 500, "Blobs smaller than this are dropped (px).", 1, 100000),
-            fill_invalid_px=declare(self, "fill_invalid_px", 0, "Pixels without depth take the mean height of the "
-                                    "valid ones within this radius (px; 0 = off; 4 for a real camera).", 0, 50),
-            median_px=declare(self, "median_px", 0, "Median filter of the height map: 0 (off), 3 or 5 (a noisy "
-                              "real camera).", 0, 5),
-            blur_px=declare(self, "blur_px", 0.0, "Gaussian sigma smoothing the height map after the median (px; 0 = "
-                            "off; 1.0 for a real camera).", 0.0, 20.0),
-            color_threshold=declare(self, "color_threshold", 0.0, "Outline from the registered colour image: a "
-                                    "pixel near the depth mask whose colour differs from the empty belt's by more "
-                                    "than this is fillet (8-bit levels; 0 = off; 20 for a real camera).", 0.0, 255.0),
-            color_search_px=declare(self, "color_search_px", 8, "Colour refines the outline only this close to the "
-                                    "depth mask (px).", 0, 100),
-            split_by_tracks=declare(self, "split_by_tracks", False, "Split a blob holding several tracked fillets "
-                                    "side by side where the tracker predicts them: fewer unscored fillets at the "
-                                    "edge of a crowded line, more woody ones passed (docs/results.md)."),
-        )
+        self.params = self._declare_segmentation()
         self.lanes = declare(self, "lanes", LANES, "Lanes across the belt.", 1, MAX_LANES)
         self.lane_pitch = declare(self, "lane_pitch_m", LANE_PITCH_M, "Lane centre to centre (m).", *LANE_PITCH_RANGE_M)
         self.max_fillet_width = declare(self, "max_fillet_width_m", MAX_FILLET_WIDTH_M, "A blob wider across the "
@@ -117,6 +105,32 @@ class Segmenter(Node):
         self.tracked = 0
         self._create_interfaces()
         self.diagnostics = DiagnosticsPublisher(self, self.health)
+
+    def _declare_segmentation(self) -> SegmentationParams:
+        """The segmentation's parameters (woody_vision.segmentation.SegmentationParams), declared."""
+        return SegmentationParams(
+            height_threshold_m=declare(self, "height_threshold_m", DEFAULT_HEIGHT_THRESHOLD_M, "Height above the "
+                                       "belt background that counts as fillet (m).", 0.0005, 0.1),
+            min_area_px=declare(self, "min_area_px", 500, "Blobs smaller than this are dropped (px).", 1, 100000),
+            fill_invalid_px=declare(self, "fill_invalid_px", 0, "Pixels without depth take the mean height of the "
+                                    "valid ones within this radius (px; 0 = off; 4 for a real camera).", 0, 50),
+            median_px=declare(self, "median_px", 0, "Median filter of the height map: 0 (off), 3 or 5 (a noisy "
+                              "real camera).", 0, 5),
+            blur_px=declare(self, "blur_px", 0.0, "Gaussian sigma smoothing the height map after the median (px; 0 = "
+                            "off; 1.0 for a real camera).", 0.0, 20.0),
+            color_threshold=declare(self, "color_threshold", 0.0, "Outline from the registered colour image: a "
+                                    "pixel near the depth mask whose colour differs from the empty belt's by more "
+                                    "than this is fillet (8-bit levels; 0 = off; 20 for a real camera).", 0.0, 255.0),
+            color_search_px=declare(self, "color_search_px", 8, "Colour refines the outline only this close to the "
+                                    "depth mask (px).", 0, 100),
+            split_by_tracks=declare(self, "split_by_tracks", False, "Split a blob holding several tracked fillets "
+                                    "side by side where the tracker predicts them: fewer unscored fillets at the "
+                                    "edge of a crowded line, more woody ones passed (docs/results.md)."),
+            height_core_floor=declare(self, "height_core_floor", DEFAULT_HEIGHT_CORE_FLOOR, "A blob wider than "
+                                      "max_fillet_width_m is split at its thick middles, cut at 0.75 x its height "
+                                      "and lower down to this: lower splits a thin fillet from a thick one, fewer "
+                                      "unscored, more woody ones passed (docs/results.md).", 0.3, 0.75),
+        )
 
     def _declare_pairing(self) -> FramePairing | None:
         """How colour frames pair with depth frames, or None when the outline comes from depth only."""
