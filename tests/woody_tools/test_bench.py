@@ -26,7 +26,8 @@ def test_a_small_rate_per_reference_is_printed_to_four_significant_digits(monkey
 
     monkeypatch.setattr(command, "reference_ms", lambda: 1.836)
     monkeypatch.setattr(command, "bench_graph", lambda **line: {"woody_run_rtf": 0.73, "verdicts": 70})
-    assert command.run(argparse.Namespace(target="graph", json_path=None, lanes=3, speed_fpm=100.0, live=False)) == 0
+    assert command.run(argparse.Namespace(target="graph", json_path=None, lanes=3, speed_fpm=100.0, live=False,
+                                          line=None, lane_pitch=None, spacing=None)) == 0
     printed = dict(line.split() for line in capsys.readouterr().out.splitlines())
     assert printed == {"reference_ms": "1.836", "woody_run_rtf": "0.73", "woody_run_rtf_ref": "0.00134",
                        "verdicts": "70"}
@@ -45,3 +46,19 @@ def test_the_line_to_benchmark_is_checked_like_woody_runs(capsys):
         with pytest.raises(SystemExit):
             parser.parse_args(["graph", *bad])
         assert "woody bench: error: argument" in capsys.readouterr().err
+
+
+def test_the_graph_runs_the_crowded_line_it_is_given(monkeypatch, capsys):
+    import argparse
+
+    from woody_tools.commands import bench as command
+
+    given = {}
+    monkeypatch.setattr(command, "bench_graph", lambda **line: given.update(line) or {"woody_run_rtf": 0.3})
+    parser = argparse.ArgumentParser(prog="woody bench")
+    command.add_arguments(parser)
+    args = parser.parse_args(["graph", "--lanes", "6", "--speed-fpm", "130", "--line", "messy", "--lane-pitch",
+                              "0.12", "--spacing", "0.26"])
+    assert command.run(args) == 0
+    assert given["crowding"] == ["--line", "messy", "--lane-pitch", "0.12", "--spacing", "0.26"]
+    assert command._crowding(parser.parse_args(["graph"])) == []

@@ -20,6 +20,7 @@ import statistics
 import subprocess
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -92,13 +93,15 @@ def bench_sim(seconds: float, lanes: int = LANES, speed_fpm: float = REFERENCE_S
 
 
 def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, spawn_s: float = 10.0,
-                live: bool = False) -> dict:
+                live: bool = False, crowding: Sequence[str] = ()) -> dict:
     """`woody run` (the whole graph with the recorder) at ``lanes`` and ``speed_fpm``, spawning for ``spawn_s`` sim
     seconds so the line runs full, as a subprocess: its speed, its node start-up, whether every fillet got its
-    verdict and whether the recorder lost anything. With ``live``, the same line once more with ``--live`` and a
-    Foxglove client watching the colour image, the annotations and the verdicts: the view's cost to the line."""
-    line = ["--lanes", str(lanes), "--speed-fpm", f"{speed_fpm:g}", "--duration", f"{spawn_s:g}"]
-    figures = {"lanes": lanes, "speed_fpm": speed_fpm, **_graph_run(line, "woody_run")}
+    verdict and whether the recorder lost anything. ``crowding``: more `woody run` options of the line (its
+    preset, lane pitch and spacing). With ``live``, the same line once more with ``--live`` and a Foxglove client
+    watching the colour image, the annotations and the verdicts: the view's cost to the line."""
+    line = ["--lanes", str(lanes), "--speed-fpm", f"{speed_fpm:g}", "--duration", f"{spawn_s:g}", *crowding]
+    figures = {"lanes": lanes, "speed_fpm": speed_fpm, "line": " ".join(crowding) or "tidy",
+               **_graph_run(line, "woody_run")}
     if live:
         figures.update(_graph_run(line, "woody_run_live"))
         figures["woody_run_live_pace_ratio"] = figures["woody_run_live_line_rtf"] / figures["woody_run_line_rtf"]

@@ -40,6 +40,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="graph: run the line a second time with --live and a Foxglove client watching")
     parser.add_argument("--speed-fpm", type=LINE_SPEED, default=REFERENCE_SPEED_FPM,
                         help=f"line speed of the line `sim` and `graph` run, in FPM (default {REFERENCE_SPEED_FPM:g})")
+    parser.add_argument("--line", default=None, metavar="PRESET",
+                        help="graph: the line's conditions preset (woody run --line; default tidy)")
+    parser.add_argument("--lane-pitch", type=float, default=None, metavar="M",
+                        help="graph: distance between lane centres (woody run --lane-pitch)")
+    parser.add_argument("--spacing", type=float, default=None, metavar="M",
+                        help="graph: belt distance between consecutive fillets of a lane (woody run --spacing); "
+                             "with --lane-pitch 0.12 and --spacing 0.26 a crowded line")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     line = {"lanes": int(args.lanes), "speed_fpm": args.speed_fpm}
     benches = {"sim": lambda: bench_sim(args.seconds, **line),
                "vision": lambda: bench_vision(args.frames, args.seconds),
-               "graph": lambda: bench_graph(**line, live=args.live),
+               "graph": lambda: bench_graph(**line, live=args.live, crowding=_crowding(args)),
                "sweep": bench_sweep}
     if args.target == "physics":
         return _physics_settings(args, reference)
@@ -61,6 +68,12 @@ def run(args: argparse.Namespace) -> int:
         Path(args.json_path).write_text(json.dumps(figures, indent=2) + "\n")
         print(f"wrote {args.json_path}")
     return 0
+
+
+def _crowding(args: argparse.Namespace) -> list[str]:
+    """The `woody run` options of `graph`'s line beyond lanes and speed: those given on the command line."""
+    given = (("--line", args.line), ("--lane-pitch", args.lane_pitch), ("--spacing", args.spacing))
+    return [text for option, value in given if value is not None for text in (option, f"{value}")]
 
 
 def _physics_settings(args: argparse.Namespace, reference: float) -> int:
