@@ -61,8 +61,8 @@ class Blob:
     mean_height_m: float
 
 
-DEFAULT_HEIGHT_CORE_FLOOR = 0.75
-"""The lowest cut of a wide blob's relief tried by default: the first, 0.75 × its highest pixel, only."""
+HEIGHT_CORE_RATIO = 0.75
+"""The first cut of a wide blob's relief (× its highest pixel), and by default the only one."""
 
 
 @dataclass(frozen=True)
@@ -77,10 +77,10 @@ class SegmentationParams:
     """Components less solid (area / hull area) than this are checked for several fillets."""
     core_ratio: float = 0.5
     """Watershed markers: the component's pixels farther than this × its max distance from the border."""
-    height_core_ratio: float = 0.75
+    height_core_ratio: float = HEIGHT_CORE_RATIO
     """Markers of a wide component split by height: its pixels higher than this × its highest pixel (two
     fillets' middles stay apart above three quarters of the thicker one's height, also when they overlap)."""
-    height_core_floor: float = DEFAULT_HEIGHT_CORE_FLOOR
+    height_core_floor: float = HEIGHT_CORE_RATIO
     """The lowest cut tried for those markers when the first finds one fillet only (in steps of 0.05; the
     default tries one cut): a fillet much thinner than its neighbour rises above the saddle between them only
     below three quarters of the thicker one's height. Lower (0.5) splits more of the fillets that merge side by

@@ -54,8 +54,8 @@ from woody_vision.image_encodings import color_rgb, depth_metres, match_size
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.mount_watch import MountWatch
 from woody_vision.segmentation import (
-    DEFAULT_HEIGHT_CORE_FLOOR,
     DEFAULT_HEIGHT_THRESHOLD_M,
+    HEIGHT_CORE_RATIO,
     BackgroundModel,
     SegmentationParams,
     segment_depth,
@@ -126,10 +126,11 @@ class Segmenter(Node):
             split_by_tracks=declare(self, "split_by_tracks", False, "Split a blob holding several tracked fillets "
                                     "side by side where the tracker predicts them: fewer unscored fillets at the "
                                     "edge of a crowded line, more woody ones passed (docs/results.md)."),
-            height_core_floor=declare(self, "height_core_floor", DEFAULT_HEIGHT_CORE_FLOOR, "A blob wider than "
-                                      "max_fillet_width_m is split at its thick middles, cut at 0.75 x its height "
-                                      "and lower down to this: lower splits a thin fillet from a thick one, fewer "
-                                      "unscored, more woody ones passed (docs/results.md).", 0.3, 0.75),
+            height_core_floor=declare(self, "height_core_floor", HEIGHT_CORE_RATIO, "A blob wider than "
+                                      f"max_fillet_width_m is split at its thick middles, cut at {HEIGHT_CORE_RATIO:g}"
+                                      " x its height and lower down to this: lower splits a thin fillet from a thick "
+                                      "one, fewer unscored, more woody ones passed (docs/results.md).", 0.3,
+                                      HEIGHT_CORE_RATIO),
         )
 
     def _declare_pairing(self) -> FramePairing | None:
