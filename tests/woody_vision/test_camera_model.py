@@ -1,4 +1,4 @@
-"""woody_vision.camera_model.belt_outline: the perspective of height taken out of an outline."""
+"""woody_vision.camera_model.belt_outline: the perspective of the drop below the belt taken out of an outline."""
 
 from __future__ import annotations
 
@@ -37,4 +37,12 @@ def test_a_point_without_depth_keeps_its_place():
     depth = np.full((360, 640), np.nan, np.float32)
     depth[0, 0] = 0.0
     points = np.array([[600, 100], [0, 0], [700, 400]])  # the last one outside the image: clipped to read depth
+    assert belt_outline(points, depth, K, HEIGHT).tolist() == points.tolist()
+
+
+def test_a_point_above_the_belt_keeps_its_place():
+    """A fillet's top seen from aside is where the ray grazes its side: moving it in by its height would narrow
+    the far side of a fillet in an outer lane."""
+    depth = np.full((360, 640), HEIGHT - 0.03, np.float32)
+    points = np.array([[600, 100], [40, 300], [320, 180]])
     assert belt_outline(points, depth, K, HEIGHT).tolist() == points.tolist()

@@ -71,17 +71,21 @@ def pixel_to_belt(
 
 def belt_outline(contour: np.ndarray, depth: np.ndarray, k: Sequence[float] | np.ndarray | Intrinsics,
                  camera_height_m: float, window: int = DEPTH_WINDOW_POINTS) -> np.ndarray:
-    """A contour with the perspective of height taken out: each point where the camera would see its 3D point
-    (at the z-depth under it) if that point lay on the belt plane, in pixels (int32, (N, 2)).
+    """A contour with the perspective of the drop taken out: each point hanging below the belt where the camera
+    would see its 3D point (at the z-depth under it) if that point lay on the belt plane, in pixels (int32, (N, 2)).
 
     A fillet bending down over the roller edge hangs below the belt; off the optical axis the camera sees the
     hanging part pulled towards the image centre by its drop / camera height times its distance from the axis,
     so one bend looks different in an outer lane than in the centre, and a turned fillet differently on either
-    side of the axis. On this outline the shape change is the fillet's own. Each point's depth is the median
-    of the valid readings of the ``window`` contour points around it: a real camera's flying pixels and holes
-    at an object's border are single points, the part hanging over the edge a stretch of them. A reading
-    more than `MAX_DROP_M` below the belt is not valid (the floor behind the fillet), nor is NaN or 0; a
-    point with no valid reading around it keeps its place.
+    side of the axis. On this outline the shape change is the fillet's own. A point above the belt keeps its
+    place: an outline point there is where the camera's ray grazes the fillet's side, a point that depends on
+    which side the camera looks at, not the edge of the fillet's footprint, and moving it by its own height
+    narrows the far side of a fillet in an outer lane by pixels (more as it tips); the fillet lies flat in its
+    reference and on the belt, so its height changes nothing there that the score compares. Each point's depth
+    is the median of the valid readings of the ``window`` contour points around it: a real camera's flying
+    pixels and holes at an object's border are single points, the part hanging over the edge a stretch of
+    them. A reading more than `MAX_DROP_M` below the belt is not valid (the floor behind the fillet), nor is
+    NaN or 0; a point with no valid reading around it keeps its place.
     """
     intr = intrinsics_from_k(k)
     points = np.asarray(contour).reshape(-1, 2)
@@ -91,7 +95,7 @@ def belt_outline(contour: np.ndarray, depth: np.ndarray, k: Sequence[float] | np
     with np.errstate(invalid="ignore"):
         z[~((z > 0.0) & (z <= camera_height_m + MAX_DROP_M))] = np.nan
     z = _along_contour_median(z, window)
-    scale = np.where(np.isfinite(z), z, camera_height_m) / camera_height_m
+    scale = np.maximum(np.where(np.isfinite(z), z, camera_height_m), camera_height_m) / camera_height_m
     u = intr.cx + (points[:, 0] - intr.cx) * scale
     v = intr.cy + (points[:, 1] - intr.cy) * scale
     return np.round(np.stack([u, v], axis=1)).astype(np.int32)
