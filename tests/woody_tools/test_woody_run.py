@@ -380,3 +380,23 @@ def test_a_camera_file_sets_line_sims_camera_its_error_model_and_the_segmenters_
     assert params["segmenter"]["depth_unit_m"] == 0.001 and params["segmenter"]["camera_height_m"] == 0.7
     assert params["segmenter"]["color_threshold"] > 0  # a real camera's filters
     assert _parameters("--top-camera", str(orbbec), "--sensor", "ideal")["line_sim"]["sensor"] == "ideal"
+
+
+def test_a_run_whose_grader_is_behind_the_line_waits_for_what_it_owes():
+    """The line runs on while a held-up grader works through its queue: the run ends on the grader's progress,
+    not on the line's sim time, or the verdicts still in the queue would be lost."""
+    from types import SimpleNamespace
+
+    from woody_experiments.run_report import Spawn
+    from woody_tools.line_run import LineMonitor, _finished
+
+    spawns = [Spawn(i, 0, "m", 0.0, 1.0, 0.5, 0.0, -1.0) for i in range(2)]  # both cross the roller edge at 2 s
+    one_verdict = [SimpleNamespace(fillet_id=0, lane=0)]
+    monitor = SimpleNamespace(spawns=spawns, verdicts=one_verdict, sides=[], sim_time=30.0, graded_up_to=None)
+    monitor.graded_time = lambda: LineMonitor.graded_time(monitor)
+    args = SimpleNamespace(lanes=3, side_rate=0.0, duration=None)
+    assert _finished(monitor, 2, args)  # no report from the grader: the line's time
+    monitor.graded_up_to = 5.9
+    assert not _finished(monitor, 2, args)
+    monitor.graded_up_to = 6.1
+    assert _finished(monitor, 2, args)

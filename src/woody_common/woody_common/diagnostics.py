@@ -22,6 +22,9 @@ from woody_common import topics
 PERIOD_S = 1.0
 """Wall seconds between two reports of one node."""
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+GRADED_UP_TO = "tracks graded up to (sim s)"
+"""The grader's figure: the stamp of the latest track message it has graded, to the millisecond. A run that
+ends the line on sim time waits for it, so a grader held up still publishes every verdict it owes."""
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ from woody_bag.recorder_node import recorder_failure
 from woody_bag.summary import bag_summary, losses_text, recorded_losses, recording_text, unrecorded_topics
 from woody_common import topics
 from woody_common.dds_shm import remove_stale
+from woody_common.diagnostics import GRADED_UP_TO
 from woody_common.line import fpm_to_mps, spacing_at_rate, watched_lane
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.fillet_pictures import write_fillet_pictures
@@ -171,6 +172,8 @@ class LineMonitor:
         self.last_frame: tuple[float, float] | None = None
         self.health: dict[str, tuple[int, str]] = {}
         """Node name -> (level, message) of its latest /diagnostics status."""
+        self.graded_up_to: float | None = None
+        """The grader's latest graded track stamp by its /diagnostics (sim s); None before it reports one."""
         self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, 50)
         self.node.create_subscription(FilletSpawn, topics.GROUND_TRUTH, self._on_spawn, latched)
         self.node.create_subscription(FilletVerdict, topics.VERDICTS, self._on_verdict, reliable)
@@ -180,7 +183,16 @@ class LineMonitor:
 
     def _on_diagnostics(self, msg) -> None:
         for status in msg.status:
-            self.health[status.name.rsplit("/", 1)[-1]] = (status.level[0], status.message)
+            name = status.name.rsplit("/", 1)[-1]
+            self.health[name] = (status.level[0], status.message)
+            if name == "grader":
+                self.graded_up_to = next((float(kv.value) for kv in status.values if kv.key == GRADED_UP_TO),
+                                         self.graded_up_to)
+
+    def graded_time(self) -> float:
+        """Sim time the line has been graded up to: the grader's progress where it reports one, else the
+        line's."""
+        return self.sim_time if self.graded_up_to is None else min(self.sim_time, self.graded_up_to)
 
     def holding_up(self) -> list[str]:
         """What holds the line up now, by its nodes' diagnostics: what line_sim waits for, and every node in
@@ -621,4 +633,4 @@ def _finished(monitor: LineMonitor, fillets: int | None, args: argparse.Namespac
     if len(monitor.verdicts) >= len(monitor.spawns) and monitor.sim_time > last + MATCH_TOLERANCE_S and not waiting:
         return True  # not before the last fillet's verdict is due (a track split in two publishes two verdicts),
         # nor before the watched lane's side metrics are in
-    return monitor.sim_time > last + 4.0
+    return monitor.graded_time() > last + 4.0  # a grader held up still publishes what it owes

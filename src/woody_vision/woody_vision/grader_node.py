@@ -37,7 +37,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 
 from woody_common import topics
-from woody_common.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher, Health
+from woody_common.diagnostics import ERROR, GRADED_UP_TO, OK, WARN, DiagnosticsPublisher, Health
 from woody_common.line import (
     LANES,
     MAX_LANES,
@@ -115,6 +115,7 @@ class Grader(Node):
         self.published = 0
         self.unscored = 0
         self.side_published = 0
+        self.graded_up_to = 0.0
         annotate = declare(self, "publish_annotations", True, "Publish grading/annotations (foxglove_msgs/"
                            "ImageAnnotations, one per top frame: each track's outline coloured by its state with a "
                            "label of id, lane and Φ_t; at its verdict the reference outline and the outline at the "
@@ -144,7 +145,7 @@ class Grader(Node):
         values = {"verdicts": self.published, "unscored": self.unscored, "side metrics": self.side_published,
                   "tracks in progress": self.core.in_progress if self.core else 0,
                   "track messages waiting for camera_info": len(self.early_tracks),
-                  "side frames rejected": self.side_checker.rejected}
+                  "side frames rejected": self.side_checker.rejected, GRADED_UP_TO: f"{self.graded_up_to:.3f}"}
         if self.core is None:
             return Health(ERROR, f"waiting for camera_info on {topics.TOP_DEPTH_INFO}", values)
         line = f"{self.published} verdicts, {self.unscored} unscored"
@@ -235,6 +236,7 @@ class Grader(Node):
         graded = self.core.on_tracks(stamp, tracks, msg.ended_ids)
         self._publish(graded)
         self._publish_side(self.core.release(stamp))
+        self.graded_up_to = stamp
         if self.annotation_pub is not None:
             overlays = [Overlay(t.id, t.lane, self.labels.get(t.id, "pending"), FRAME, stamp,
                                 outline(_points(t.contour_uv)), phi=self.core.frame_phi(t.id, stamp)) for t in usable]
