@@ -30,6 +30,7 @@ from woody_vision.shape_score import (
     ShapeEvaluator,
     aspect_ratio,
     clip_body,
+    extrapolate_at,
     fill_rows,
     flat_overlap,
     interpolate_at,
@@ -456,6 +457,33 @@ def test_a_fillet_merged_at_its_measuring_point_is_unscored_with_the_reason():
     _, result, _ = run_evaluator(crowded)
     assert result.status == STATUS_UNSCORED and result.rejected_frames == 3
     assert result.reason.startswith("no clean frames around the measuring point")
+
+
+def test_a_fillet_merged_just_before_its_measuring_point_is_scored_from_the_clean_frames_past_it():
+    """Two side-by-side fillets merge for a few frames as they tip: the frames left before the point are too far
+    back, but the first clean frame past it lies within a frame's advance, so the line through it and the next one
+    reads the point."""
+    contours = translating(90, bend=drooping)
+    _, plain, _ = run_evaluator(contours)
+    frames = plain.trace + plain.extra_trace
+    past = next(i for i, f in enumerate(frames) if f.overhang >= plain.line_fraction)
+    first = round(frames[past].stamp * FPS)
+    crowded = [merged_with_follower(c) if first - 3 <= i < first else c for i, c in enumerate(contours)]
+    _, result, _ = run_evaluator(crowded)
+    assert result.status == STATUS_SCORED and result.rejected_frames == 3
+    assert result.line_phi == pytest.approx(plain.line_phi, rel=0.05)
+
+
+def test_extrapolation_takes_the_nearer_side_within_a_frame_and_never_across_a_gap():
+    def trace(*pairs):
+        return [FrameScore(i / FPS, phi, math.nan, math.nan, overhang) for i, (overhang, phi) in enumerate(pairs)]
+
+    assert extrapolate_at(trace((0.1, 1.0), (0.2, 2.0), (0.55, 6.0), (0.65, 8.0)), 0.5, 0.1) == (
+        pytest.approx(5.0), 2)
+    assert extrapolate_at(trace((0.35, 3.0), (0.45, 4.0), (0.8, 9.0), (0.9, 11.0)), 0.5, 0.1) == (
+        pytest.approx(4.5), 1)
+    assert math.isnan(extrapolate_at(trace((0.1, 1.0), (0.2, 2.0), (0.65, 8.0), (0.75, 9.0)), 0.5, 0.1)[0])
+    assert extrapolate_at(trace((0.2, 1.0), (0.55, 6.0), (0.9, 8.0)), 0.5, 0.1)[1] is None
 
 
 def test_the_reference_skips_a_flat_frame_merged_with_a_neighbour():

@@ -67,7 +67,9 @@ a fillet side by side in the next lane); one whose centroid has moved across
 the flow by more than ``LATERAL_JUMP_RATIO`` × the reference's width is
 another fillet's blob (a track that switched fillets after a merge). Either
 is rejected, never scored, and counted. If the frames left around the
-measuring point are too far apart, the fillet is unscored with the reason. The reference is likewise the latest
+measuring point are too far apart, the point is read on the line through the two clean frames nearest it on
+one side (:func:`extrapolate_at`) when the nearer lies within a frame's advance of it; else the fillet is
+unscored with the reason. The reference is likewise the latest
 flat outline not grown beyond ``MERGE_GROWTH`` × the median flat area.
 
 Two outlines. On a line the evaluator follows the fillet's outline on the belt plane
@@ -377,6 +379,23 @@ def interpolate_at(frames: list[FrameScore], fraction: float) -> tuple[float, in
     return math.nan, None, math.inf
 
 
+def extrapolate_at(frames: list[FrameScore], fraction: float, step: float) -> tuple[float, int | None]:
+    """Φ_t at the overhang ``fraction`` along the line through the two frames nearest it on one side, when the
+    nearer lies within a frame's advance ``step`` of it and the two are no gap apart; and that frame's index.
+
+    (NaN, None) when neither side has such a pair. Of two sides, the nearer frame's wins."""
+    best: tuple[float, float, int | None] = (math.inf, math.nan, None)
+    after = [i for i, f in enumerate(frames) if f.overhang >= fraction and math.isfinite(f.phi)][:2]
+    before = [i for i, f in enumerate(frames) if f.overhang <= fraction and math.isfinite(f.phi)][-2:][::-1]
+    for near, far in (pair for pair in (after, before) if len(pair) == 2):
+        a, b = frames[near], frames[far]
+        distance = abs(a.overhang - fraction)
+        if distance <= step and not is_gap(abs(b.overhang - a.overhang), step) and distance < best[0]:
+            slope = (b.phi - a.phi) / (b.overhang - a.overhang)
+            best = (distance, a.phi + slope * (fraction - a.overhang), near)
+    return best[1], best[2]
+
+
 def turn_deg(contour: np.ndarray) -> float:
     """Angle (0..90 degrees) between the outline's principal (long) axis and the flow (image rows).
 
@@ -576,9 +595,12 @@ class ShapeEvaluator:
 
     def _finish_line(self) -> ShapeResult:
         frames = self._trace + self._extra
-        line_phi, nearer, gap = interpolate_at(rising_envelope(frames), self.line_fraction)
+        envelope = rising_envelope(frames)
+        line_phi, nearer, gap = interpolate_at(envelope, self.line_fraction)
         step = self._advance_per_frame() / self._reference.length_px
         if nearer is None or not math.isfinite(line_phi) or is_gap(gap, step):
+            line_phi, nearer = extrapolate_at(envelope, self.line_fraction, step)
+        if nearer is None or not math.isfinite(line_phi):
             return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
         reason = REASON_WINDOW_GAP.format(self._window_gap) if self._window_gap else ""
         return self._finish(STATUS_SCORED, reason, line_phi, self._contours[nearer], frames[nearer].stamp)
