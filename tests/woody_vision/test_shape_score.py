@@ -37,6 +37,7 @@ from woody_vision.shape_score import (
     leading_cut_rows,
     leading_end,
     make_reference,
+    own_frames,
     rising_envelope,
     shape_terms,
     solidity,
@@ -484,6 +485,18 @@ def test_extrapolation_takes_the_nearer_side_within_a_frame_and_never_across_a_g
         pytest.approx(4.5), 1)
     assert math.isnan(extrapolate_at(trace((0.1, 1.0), (0.2, 2.0), (0.65, 8.0), (0.75, 9.0)), 0.5, 0.1)[0])
     assert extrapolate_at(trace((0.2, 1.0), (0.55, 6.0), (0.9, 8.0)), 0.5, 0.1)[1] is None
+
+
+def test_a_frame_the_envelope_lowers_by_more_than_half_is_dropped_and_a_small_dip_is_kept():
+    def trace(*pairs):
+        return [FrameScore(i / FPS, phi, math.nan, math.nan, overhang) for i, (overhang, phi) in enumerate(pairs)]
+
+    kept, own = own_frames(trace((0.33, 1.3), (0.45, 17.9), (0.71, 5.1), (0.89, 6.2)))
+    assert kept == [0, 2, 3] and [f.phi for f in own] == [1.3, 5.1, 6.2]
+    kept, own = own_frames(trace((0.3, 2.0), (0.4, 1.8), (0.5, 2.5)))
+    assert kept == [0, 1, 2] and [f.phi for f in own] == [1.8, 1.8, 2.5]
+    kept, _ = own_frames(trace((0.3, 0.4), (0.4, 0.1), (0.5, 0.2)))  # a flat fillet's near-zero Φ_t
+    assert kept == [0, 1, 2]
 
 
 def test_the_reference_skips_a_flat_frame_merged_with_a_neighbour():

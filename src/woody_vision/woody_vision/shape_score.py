@@ -131,6 +131,12 @@ FLAT_MIN_SHARE = 0.2
 """The flat part is compared while the reference's part on the belt is at least this share of its area."""
 TRAILING_JUMP_PX = 3
 """A window frame whose trailing edge lies this far behind the previous frame's belongs to a merged follower."""
+CONTAMINATED_RATIO = 0.5
+"""A window frame whose Φ_t the rising envelope lowers below this fraction of it carried a neighbour's outline that
+the merge tests above missed: it is rejected when the line score is read. Lowered instead, it would take the value
+of a later frame, further along the rise, at its own earlier overhang. A fillet's own Φ_t dips by far less."""
+CONTAMINATED_MIN_PHI = 1.0
+"""...and by at least this much: a fillet still flat scores about 0, and its Φ_t's dips are large fractions of it."""
 LEADING_NARROW = "narrow"
 LEADING_BLUNT = "blunt"
 FLAT_HISTORY = 8
@@ -361,6 +367,15 @@ def rising_envelope(frames: list[FrameScore]) -> list[FrameScore]:
             lowest = min(lowest, phi)
             out[i] = replace(frames[i], phi=lowest)
     return out
+
+
+def own_frames(frames: list[FrameScore]) -> tuple[list[int], list[FrameScore]]:
+    """The indices of the frames the fillet's own outline scored, and their rising envelope: every frame but those
+    the envelope lowers below `CONTAMINATED_RATIO` of their Φ_t (by more than `CONTAMINATED_MIN_PHI`)."""
+    envelope = rising_envelope(frames)
+    kept = [i for i, (frame, capped) in enumerate(zip(frames, envelope))
+            if not (capped.phi < CONTAMINATED_RATIO * frame.phi and frame.phi - capped.phi > CONTAMINATED_MIN_PHI)]
+    return kept, [envelope[i] for i in kept]
 
 
 def interpolate_at(frames: list[FrameScore], fraction: float) -> tuple[float, int | None, float]:
@@ -595,14 +610,16 @@ class ShapeEvaluator:
 
     def _finish_line(self) -> ShapeResult:
         frames = self._trace + self._extra
-        envelope = rising_envelope(frames)
-        line_phi, nearer, gap = interpolate_at(envelope, self.line_fraction)
+        kept, own = own_frames(frames)
+        self._rejected += len(frames) - len(kept)
+        line_phi, nearer, gap = interpolate_at(own, self.line_fraction)
         step = self._advance_per_frame() / self._reference.length_px
         if nearer is None or not math.isfinite(line_phi) or is_gap(gap, step):
-            line_phi, nearer = extrapolate_at(envelope, self.line_fraction, step)
+            line_phi, nearer = extrapolate_at(own, self.line_fraction, step)
         if nearer is None or not math.isfinite(line_phi):
             return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
         reason = REASON_WINDOW_GAP.format(self._window_gap) if self._window_gap else ""
+        nearer = kept[nearer]
         return self._finish(STATUS_SCORED, reason, line_phi, self._contours[nearer], frames[nearer].stamp)
 
     def _advance_per_frame(self) -> float:
