@@ -485,6 +485,7 @@ def test_extrapolation_takes_the_nearer_side_within_a_frame_and_never_across_a_g
         pytest.approx(4.5), 1)
     assert math.isnan(extrapolate_at(trace((0.1, 1.0), (0.2, 2.0), (0.65, 8.0), (0.75, 9.0)), 0.5, 0.1)[0])
     assert extrapolate_at(trace((0.2, 1.0), (0.55, 6.0), (0.9, 8.0)), 0.5, 0.1)[1] is None
+    assert extrapolate_at(trace((0.1, 0.1), (0.58, 0.2), (0.62, 3.0)), 0.5, 0.1) == (0.0, 1)  # never below 0
 
 
 def test_a_frame_the_envelope_lowers_by_more_than_half_is_dropped_and_a_small_dip_is_kept():

@@ -396,7 +396,8 @@ def interpolate_at(frames: list[FrameScore], fraction: float) -> tuple[float, in
 
 def extrapolate_at(frames: list[FrameScore], fraction: float, step: float) -> tuple[float, int | None]:
     """Φ_t at the overhang ``fraction`` along the line through the two frames nearest it on one side, when the
-    nearer lies within a frame's advance ``step`` of it and the two are no gap apart; and that frame's index.
+    nearer lies within a frame's advance ``step`` of it and the two are no gap apart; and that frame's index. Φ_t
+    is never below 0, nor is the value read (a steep line followed back can cross it).
 
     (NaN, None) when neither side has such a pair. Of two sides, the nearer frame's wins."""
     best: tuple[float, float, int | None] = (math.inf, math.nan, None)
@@ -407,7 +408,7 @@ def extrapolate_at(frames: list[FrameScore], fraction: float, step: float) -> tu
         distance = abs(a.overhang - fraction)
         if distance <= step and not is_gap(abs(b.overhang - a.overhang), step) and distance < best[0]:
             slope = (b.phi - a.phi) / (b.overhang - a.overhang)
-            best = (distance, a.phi + slope * (fraction - a.overhang), near)
+            best = (distance, max(0.0, a.phi + slope * (fraction - a.overhang)), near)
     return best[1], best[2]
 
 
