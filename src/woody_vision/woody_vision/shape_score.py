@@ -134,7 +134,9 @@ TRAILING_JUMP_PX = 3
 CONTAMINATED_RATIO = 0.5
 """A window frame whose Φ_t the rising envelope lowers below this fraction of it carried a neighbour's outline that
 the merge tests above missed: it is rejected when the line score is read. Lowered instead, it would take the value
-of a later frame, further along the rise, at its own earlier overhang. A fillet's own Φ_t dips by far less."""
+of a later frame, further along the rise, at its own earlier overhang. A fillet's own Φ_t seldom dips that far:
+headless, with no neighbour to join it, 59 of 5,400 evaluations had such a frame, and 2 line scores moved by 4 % or
+less."""
 CONTAMINATED_MIN_PHI = 1.0
 """...and by at least this much: a fillet still flat scores about 0, and its Φ_t's dips are large fractions of it."""
 LEADING_NARROW = "narrow"
