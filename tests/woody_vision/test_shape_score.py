@@ -460,6 +460,11 @@ def test_a_fillet_merged_at_its_measuring_point_is_unscored_with_the_reason():
     assert result.reason.startswith("no clean frames around the measuring point")
 
 
+def trace(*pairs) -> list[FrameScore]:
+    """Window frames of (overhang, Φ_t) pairs, one a frame apart."""
+    return [FrameScore(i / FPS, phi, math.nan, math.nan, overhang) for i, (overhang, phi) in enumerate(pairs)]
+
+
 def test_a_fillet_merged_just_before_its_measuring_point_is_scored_from_the_clean_frames_past_it():
     """Two side-by-side fillets merge for a few frames as they tip: the frames left before the point are too far
     back, but the first clean frame past it lies within a frame's advance, so the line through it and the next one
@@ -476,9 +481,6 @@ def test_a_fillet_merged_just_before_its_measuring_point_is_scored_from_the_clea
 
 
 def test_extrapolation_takes_the_nearer_side_within_a_frame_and_never_across_a_gap():
-    def trace(*pairs):
-        return [FrameScore(i / FPS, phi, math.nan, math.nan, overhang) for i, (overhang, phi) in enumerate(pairs)]
-
     assert extrapolate_at(trace((0.1, 1.0), (0.2, 2.0), (0.55, 6.0), (0.65, 8.0)), 0.5, 0.1) == (
         pytest.approx(5.0), 2)
     assert extrapolate_at(trace((0.35, 3.0), (0.45, 4.0), (0.8, 9.0), (0.9, 11.0)), 0.5, 0.1) == (
@@ -489,9 +491,6 @@ def test_extrapolation_takes_the_nearer_side_within_a_frame_and_never_across_a_g
 
 
 def test_a_frame_the_envelope_lowers_by_more_than_half_is_dropped_and_a_small_dip_is_kept():
-    def trace(*pairs):
-        return [FrameScore(i / FPS, phi, math.nan, math.nan, overhang) for i, (overhang, phi) in enumerate(pairs)]
-
     kept, own = own_frames(trace((0.33, 1.3), (0.45, 17.9), (0.71, 5.1), (0.89, 6.2)))
     assert kept == [0, 2, 3] and [f.phi for f in own] == [1.3, 5.1, 6.2]
     kept, own = own_frames(trace((0.3, 2.0), (0.4, 1.8), (0.5, 2.5)))

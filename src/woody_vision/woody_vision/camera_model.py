@@ -95,7 +95,7 @@ def belt_outline(contour: np.ndarray, depth: np.ndarray, k: Sequence[float] | np
     with np.errstate(invalid="ignore"):
         z[~((z > 0.0) & (z <= camera_height_m + MAX_DROP_M))] = np.nan
     z = _along_contour_median(z, window)
-    scale = np.maximum(np.where(np.isfinite(z), z, camera_height_m), camera_height_m) / camera_height_m
+    scale = np.fmax(z, camera_height_m) / camera_height_m  # no reading (NaN) and above the belt: in place
     u = intr.cx + (points[:, 0] - intr.cx) * scale
     v = intr.cy + (points[:, 1] - intr.cy) * scale
     return np.round(np.stack([u, v], axis=1)).astype(np.int32)
