@@ -147,6 +147,33 @@ def test_a_fillet_first_seen_past_the_edge_beside_its_lane_neighbour_gets_its_un
     assert grader.fragments == 0
 
 
+def lost_at_the_edge(grader: FilletGrader, shapes, handover: int) -> list[GradedFillet]:
+    """Track 1 follows the fillet up to frame ``handover``, where it takes a sliver split off past the edge and
+    the fillet's own outline opens track 2, which follows it to the end."""
+    sliver = np.array([[320, 205], [335, 205], [335, 220], [320, 220]], np.int32)
+    out = []
+    for i, contour in enumerate(shapes):
+        if i < handover:
+            observed = [TrackObservation(1, 0, contour)]
+        else:
+            observed = [TrackObservation(1, 0, sliver, unseen=int(i > handover)), TrackObservation(2, 0, contour)]
+        out += grader.on_tracks(i / FPS, observed)
+    return out + grader.on_tracks(len(shapes) / FPS, [], ended_ids=[1, 2])
+
+
+def test_a_fillet_its_track_lost_at_the_edge_gets_one_verdict_from_the_track_that_found_it_again():
+    shapes = contours(90)
+    ((_, plain),) = feed(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 0, shapes, end=True)
+    closes = round(plain.shape.stamp * FPS)
+    grader = FilletGrader(EDGE, GradingRules(threshold=1.0))
+    (verdict,) = lost_at_the_edge(grader, shapes, handover=closes - 2)  # in the window, before it closes
+    assert verdict.fillet_id == 2 and verdict.scored and verdict.shape.line_phi == plain.shape.line_phi
+    assert verdict.shape.rejected_frames == 1 and grader.taken_over == 1  # the sliver frame track 1 took
+    late = FilletGrader(EDGE, GradingRules(threshold=1.0))
+    (verdict,) = lost_at_the_edge(late, shapes, handover=closes + 2)  # after its verdict: none more
+    assert verdict.fillet_id == 1 and verdict.scored and late.taken_over == 1
+
+
 def test_a_sliver_lost_on_the_belt_beside_its_lane_fillet_gets_no_verdict_but_a_lost_fillet_does():
     """A crowded lane's split can leave a sliver that lives a few frames on the belt: the fillet it came off gets
     the verdict, the sliver none; a lost fillet of a fillet's size still gets its unscored verdict."""

@@ -311,6 +311,20 @@ def test_a_frame_that_lost_part_of_its_flat_outline_is_rejected_and_never_scores
     assert result.rejected_frames == plain.rejected_frames + 1 and result.phi == pytest.approx(plain.phi, abs=1e-9)
 
 
+def test_a_piece_ahead_of_the_fillets_own_trailing_edge_is_rejected_not_a_late_close():
+    """A track that took a sliver split off at the edge: its trailing edge leapt ahead of the fillet's."""
+    contours = translating(80)
+    closes, plain, _ = run_evaluator(contours)
+    opens = round(plain.trace[0].stamp * FPS)
+    sliver = polygon_contour([(290, EDGE + 5), (310, EDGE + 5), (310, EDGE + 25), (290, EDGE + 25)])
+    _, result, evaluator = run_evaluator(contours[:opens + 1] + [sliver] + contours[opens + 2:])
+    assert result.status == STATUS_SCORED and result.rejected_frames == plain.rejected_frames + 1
+    assert result.line_phi == pytest.approx(plain.line_phi, abs=1e-9)
+    trailing = rows_of(contours[closes])[0]
+    assert evaluator.predicted_trailing(closes / FPS) == pytest.approx(trailing, abs=1.0)
+    assert evaluator.continues_at(trailing + 5, closes / FPS) and not evaluator.continues_at(EDGE + 5, closes / FPS)
+
+
 def test_the_speed_is_the_fillets_recent_motion_so_a_speed_change_is_followed():
     """3 px a frame for most of the approach, then 4 (the belt sped up): measured at the new speed."""
     leads = [60.0 + 3.0 * i for i in range(30)]

@@ -174,6 +174,9 @@ class FilletGrader:
         self._forget()
         self.fragments = 0
         """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_is_piece`)."""
+        self.taken_over = 0
+        """Tracks that started past the edge where a lane-mate's fillet should be, and carried on its evaluation
+        (see :meth:`_take_over`)."""
         self.tentative = 0
         """Tracks that ended after fewer than MIN_SIGHTINGS frames (a fillet's first sightings at the image border
         before a burst of lost frames, noise): no verdict, like a tentative track in SORT-style trackers."""
@@ -213,6 +216,8 @@ class FilletGrader:
             if evaluator is None:
                 evaluator = self._evaluators[track.track_id] = ShapeEvaluator(self.edge_row, **self.evaluator_options)
             result = evaluator.update(track.contour, stamp, track.image_contour)
+            if result is not None and result.reason == REASON_STARTED_PAST_EDGE:
+                result = self._take_over(track, stamp, result)
             if result is not None:  # a finished evaluator stays until its track ends: one verdict per track
                 decided += self._decide(track.track_id, result, _area(track.contour))
         for track_id in ended_ids:
@@ -287,6 +292,21 @@ class FilletGrader:
         decision = self.rules.classify(score, conditions)
         return GradedFillet(track_id, lane, result, decision.label, decision.grade or "", score=score,
                             conditions=conditions, threshold=decision.threshold)
+
+    def _take_over(self, track: TrackObservation, stamp: float, started_past: ShapeResult) -> ShapeResult | None:
+        """A track that starts past the edge with its trailing edge where a referenced fillet of its lane should
+        have it now is that fillet, which its own track lost as it tipped (it took a piece split off at the edge,
+        or went unseen): the new track carries on that fillet's evaluation, so the fillet gets its one verdict
+        (none more if it already had it). Else the new track's own result, ``started_past``."""
+        trailing = float(np.asarray(track.contour).reshape(-1, 2)[:, 1].min())
+        owner = next((other for other, evaluator in self._evaluators.items()
+                      if other != track.track_id and self._lanes.get(other) == track.lane
+                      and evaluator.continues_at(trailing, stamp)), None)
+        if owner is None:
+            return started_past
+        evaluator = self._evaluators[track.track_id] = self._evaluators.pop(owner)
+        self.taken_over += 1
+        return evaluator.update(track.contour, stamp, track.image_contour)
 
     def _is_piece(self, lane: int, track_id: int, area_px: float) -> bool:
         """Whether a track that first appears past the edge, or ends before its body reaches it, is a piece of a

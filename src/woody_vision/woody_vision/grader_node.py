@@ -322,9 +322,10 @@ class Grader(Node):
         return msg
 
     def close(self) -> None:
-        pieces = self.core.fragments if self.core is not None else 0
+        pieces, taken = (self.core.fragments, self.core.taken_over) if self.core is not None else (0, 0)
         print(f"[grader] published {self.published} verdicts and {self.side_published} side results; {pieces} "
-              "tracks were pieces split off a fillet (no verdict)", flush=True)
+              f"tracks were pieces split off a fillet (no verdict); {taken} tracks carried on a fillet whose own "
+              "track was lost at the edge", flush=True)
 
 
 def _finite_or_nan(value: float) -> float:

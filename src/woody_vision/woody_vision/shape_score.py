@@ -63,7 +63,9 @@ outline and the approach: the fillet's speed in the image, which end leads
 Crowded lanes. A window frame whose outline suddenly grows (area or width
 beyond ``MERGE_GROWTH`` × the reference's) or whose trailing edge jumps back
 is a blob merged with a neighbour (a follower touching the fillet as it tips,
-a fillet side by side in the next lane); one whose centroid has moved across
+a fillet side by side in the next lane); one whose trailing edge lies ahead of
+where the fillet's own should be by now is a piece of an outline (a track that
+took a sliver split off at the edge); one whose centroid has moved across
 the flow by more than ``LATERAL_JUMP_RATIO`` × the reference's width is
 another fillet's blob (a track that switched fillets after a merge). Either
 is rejected, never scored, and counted. If the frames left around the
@@ -131,6 +133,11 @@ FLAT_MIN_SHARE = 0.2
 """The flat part is compared while the reference's part on the belt is at least this share of its area."""
 TRAILING_JUMP_PX = 3
 """A window frame whose trailing edge lies this far behind the previous frame's belongs to a merged follower."""
+TRAILING_LEAP_RATIO = 0.2
+"""A window frame whose trailing edge lies this far (× the body length) ahead of where the fillet's own trailing
+edge should be (:meth:`ShapeEvaluator.predicted_trailing`) is a piece of an outline, not the fillet: the part of
+a tipping fillet still on the belt rides it at the belt's speed. A track that starts past the edge with its
+trailing edge within this of a lane-mate's prediction is that fillet again (woody_vision.grader_core)."""
 CONTAMINATED_RATIO = 0.5
 """A window frame whose Φ_t the rising envelope lowers below this fraction of it carried a neighbour's outline that
 the merge tests above missed: it is rejected when the line score is read. Lowered instead, it would take the value
@@ -142,10 +149,10 @@ CONTAMINATED_MIN_PHI = 1.0
 LEADING_NARROW = "narrow"
 LEADING_BLUNT = "blunt"
 FLAT_HISTORY = 8
+"""Flat outlines kept to choose an unmerged reference from."""
 SPEED_FRAMES = 8
 """Flat frames the fillet's speed is measured over (0.23 s at 30 Hz: about 100 rows at 100 FPM, so a pixel of
 outline noise moves it by about 1 %, and a belt speed change is followed within that many frames)."""
-"""Flat outlines kept to choose an unmerged reference from."""
 
 
 def fill_rows(contour: np.ndarray) -> tuple[np.ndarray, int, int]:
@@ -473,6 +480,8 @@ class ShapeEvaluator:
         self._contours: list[np.ndarray] = []
         self._closed = False
         self._last_trailing: int | None = None
+        self._trailing_stamp = math.nan
+        """When the fillet's own trailing edge was last seen (at ``_last_trailing``)."""
         self._rejected = 0
         self._last_stamp: float | None = None
         self._step = 0.0
@@ -543,7 +552,7 @@ class ShapeEvaluator:
 
     def _remember_flat(self, points: np.ndarray, stamp: float, image: np.ndarray) -> None:
         self._flat = (self._flat + [(points, stamp, cv2.contourArea(points), image)])[-FLAT_HISTORY:]
-        self._last_trailing = int(points[:, 1].min())
+        self._see_trailing(int(points[:, 1].min()), stamp)
         self._approach.append((stamp, float(points[:, 1].max())))
 
     def _lock_reference(self) -> bool:
@@ -554,6 +563,7 @@ class ShapeEvaluator:
         self._reference = make_reference(points, self.tip_ratio)
         self._image_reference = self._reference if image is points else make_reference(image, self.tip_ratio)
         self._reference_contour = points
+        self._see_trailing(int(points[:, 1].min()), self._reference_stamp)
         self._reference_width = float(np.ptp(points[:, 0]) + 1)
         self._reference_column = _centroid_column(points)
         self._flat = []
@@ -562,12 +572,12 @@ class ShapeEvaluator:
     def _window_frame(self, points: np.ndarray, stamp: float, image: np.ndarray) -> ShapeResult | None:
         reference = self._reference
         trailing = int(points[:, 1].min())
-        if self._merged(points, trailing):
+        if self._merged(points, trailing, stamp):
             self._rejected += 1
             if self._trace and not self._closed:
                 self._note_gap()
             return None
-        self._last_trailing = trailing
+        self._see_trailing(trailing, stamp)
         if trailing + reference.length_px < self.edge_row:
             return None  # the rigid body front has not reached the edge yet: the window is not open
         if not self._closed:
@@ -597,9 +607,31 @@ class ShapeEvaluator:
         if is_gap(self._step, frame_interval([stamp for stamp, _ in self._approach])):
             self._window_gap = max(self._window_gap, self._step)
 
-    def _merged(self, points: np.ndarray, trailing: int) -> bool:
-        """Whether this window frame's blob has grown into a neighbour's (see the module doc)."""
+    def _see_trailing(self, trailing: int, stamp: float) -> None:
+        self._last_trailing = trailing
+        self._trailing_stamp = stamp
+
+    def predicted_trailing(self, stamp: float) -> float:
+        """The image row the fillet's own trailing edge should lie on at ``stamp``: its last one moved at the
+        fillet's speed (NaN before two flat frames tell it)."""
+        if self._last_trailing is None:
+            return math.nan
+        return self._last_trailing + self._speed_px_s() * (stamp - self._trailing_stamp)
+
+    def continues_at(self, trailing: float, stamp: float) -> bool:
+        """Whether an outline with this trailing edge at ``stamp`` is this referenced fillet's (see
+        TRAILING_LEAP_RATIO)."""
+        return self.referenced and abs(trailing - self.predicted_trailing(stamp)) <= self._leap_px()
+
+    def _leap_px(self) -> float:
+        return TRAILING_LEAP_RATIO * self._reference.length_px
+
+    def _merged(self, points: np.ndarray, trailing: int, stamp: float) -> bool:
+        """Whether this window frame's blob has grown into a neighbour's or is a piece of an outline (see the
+        module doc)."""
         if self._last_trailing is not None and trailing < self._last_trailing - TRAILING_JUMP_PX:
+            return True
+        if trailing > self.predicted_trailing(stamp) + self._leap_px():
             return True
         if abs(_centroid_column(points) - self._reference_column) > LATERAL_JUMP_RATIO * self._reference_width:
             return True
