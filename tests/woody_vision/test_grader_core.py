@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from woody_vision.grader_core import (
+    JOINED_MARGIN_LN,
     REASON_NO_SIDE,
     SIDE_MATCH_SLACK_S,
     SIDE_SILENT_S,
@@ -172,6 +173,28 @@ def test_a_fillet_its_track_lost_at_the_edge_gets_one_verdict_from_the_track_tha
     late = FilletGrader(EDGE, GradingRules(threshold=1.0))
     (verdict,) = lost_at_the_edge(late, shapes, handover=closes + 2)  # after its verdict: none more
     assert verdict.fillet_id == 1 and verdict.scored and late.taken_over == 1
+
+
+def beside_a_neighbour(grader: FilletGrader, shapes) -> GradedFillet:
+    """Track 1's verdict when track 2's outline lies against its right side past the edge in every frame."""
+    out = []
+    for i, contour in enumerate(shapes):
+        neighbour = contour[(contour[:, 0] > 300) & (contour[:, 1] >= EDGE - 4)] + np.array([2, 0], np.int32)
+        observed = [TrackObservation(1, 0, contour)] + ([TrackObservation(2, 1, neighbour)] if len(neighbour) else [])
+        out += grader.on_tracks(i / FPS, observed)
+    (verdict,) = [v for v in out if v.fillet_id == 1]
+    return verdict
+
+
+def test_a_fillet_graded_normal_on_frames_split_from_a_neighbour_near_the_cut_is_unscored():
+    shapes = contours(90, bend=0.4)
+    ((_, alone),) = feed(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 0, shapes)
+    near = alone.score / math.exp(0.5 * JOINED_MARGIN_LN)  # the score lies just above this cut
+    verdict = beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=near)), shapes)
+    assert verdict.label == "unscored" and verdict.reason.startswith("outline split from a neighbour's")
+    assert feed(FilletGrader(EDGE, GradingRules(threshold=near)), 1, 0, shapes)[0][1].label == "normal"
+    far = alone.score / math.exp(2.0 * JOINED_MARGIN_LN)
+    assert beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), shapes).label == "normal"
 
 
 def test_a_sliver_lost_on_the_belt_beside_its_lane_fillet_gets_no_verdict_but_a_lost_fillet_does():

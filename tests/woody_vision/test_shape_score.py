@@ -41,6 +41,7 @@ from woody_vision.shape_score import (
     rising_envelope,
     shape_terms,
     solidity,
+    touches_past,
     turn_deg,
 )
 from woody_vision.synthetic import DEFAULT_TOP_K, TopFillet, TopScene, teardrop_polygon
@@ -463,6 +464,53 @@ def test_a_window_frame_merged_with_the_follower_is_rejected_not_scored():
     _, result, _ = run_evaluator(crowded)
     assert result.rejected_frames == 1 and result.frames == plain.frames - 1
     assert result.phi == pytest.approx(plain.phi) and result.line_phi == pytest.approx(plain.line_phi)
+
+
+def with_box(contour: np.ndarray, u0: int, v0: int, u1: int, v1: int) -> np.ndarray:
+    """One outline of the contour's area and a box joined to it."""
+    mask = np.zeros((800, 800), np.uint8)
+    cv2.fillPoly(mask, [contour], 255)
+    cv2.rectangle(mask, (int(u0), int(v0)), (int(u1), int(v1)), 255, -1)
+    outline, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    return max(outline, key=cv2.contourArea).reshape(-1, 2)
+
+
+def test_a_window_frame_reaching_beyond_the_fillets_columns_or_length_is_rejected():
+    """Bending over the roller only shortens a fillet along the flow on the belt plane: more is another's."""
+    contours = translating(90, bend=drooping)
+    _, plain, _ = run_evaluator(contours)
+    opens = round(plain.trace[0].stamp * FPS)
+    lead = rows_of(contours[opens + 2])[1]
+    crowded = list(contours)
+    crowded[opens + 1] = with_box(contours[opens + 1], 300, EDGE + 2, 345, EDGE + 8)  # a neighbour's rim beside
+    crowded[opens + 2] = with_box(contours[opens + 2], 297, lead - 2, 303, lead + 20)  # the lane-mate hanging ahead
+    _, result, _ = run_evaluator(crowded)
+    assert result.rejected_frames == plain.rejected_frames + 2
+    assert result.line_phi == pytest.approx(plain.line_phi)
+
+
+def hugging(contour: np.ndarray, first_row: float) -> np.ndarray:
+    """The points of a neighbour's outline lying against the contour's right side from ``first_row`` on."""
+    side = contour[(contour[:, 0] > 300) & (contour[:, 1] >= first_row)]
+    return side + np.array([2, 0], np.int32)
+
+
+def test_touching_is_a_shared_boundary_past_the_given_row():
+    fillet = translating(1, start_lead_v=EDGE + 60.0)[0]
+    assert touches_past(fillet, [hugging(fillet, EDGE)], EDGE)
+    assert not touches_past(fillet, [hugging(fillet, EDGE) + np.array([3, 0], np.int32)], EDGE)  # a gap between
+    assert not touches_past(fillet, [hugging(fillet, EDGE)], EDGE + 50.0)  # they touch before that row only
+    assert not touches_past(fillet, [], EDGE)
+
+
+def test_frames_split_from_a_neighbour_at_the_measuring_point_are_scored_and_marked():
+    contours = translating(90, bend=drooping)
+    _, plain, _ = run_evaluator(contours)
+    evaluator = ShapeEvaluator(EDGE)
+    results = [evaluator.update(c, i / FPS, neighbours=[hugging(c, EDGE - 4)]) for i, c in enumerate(contours)]
+    (joined,) = [r for r in results if r is not None]
+    assert joined.joined_at_line and not plain.joined_at_line
+    assert joined.line_phi == pytest.approx(plain.line_phi) and joined.rejected_frames == plain.rejected_frames
 
 
 def test_a_fillet_merged_at_its_measuring_point_is_unscored_with_the_reason():

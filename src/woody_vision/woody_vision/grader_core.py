@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from woody_common.calibration import resolved_calibration
-from woody_vision.grading import LABEL_UNSCORED, FilletConditions, FittedRange, GradingRules
+from woody_vision.grading import LABEL_NORMAL, LABEL_UNSCORED, FilletConditions, FittedRange, GradingRules
 from woody_vision.shape_score import (
     LEADING_BLUNT,
     REASON_LOST_BEFORE_EDGE,
@@ -136,6 +136,15 @@ fraction of that fillet's flat outline (:meth:`FilletGrader._is_piece`)."""
 PIECE_REASONS = (REASON_STARTED_PAST_EDGE, REASON_LOST_BEFORE_EDGE)
 """The unscored results :meth:`FilletGrader._is_piece` checks: a track only a piece of a fillet ends so."""
 
+JOINED_MARGIN_LN = 0.2
+"""A fillet graded normal on a line score read on frames split from a neighbour's outline
+(``ShapeResult.joined_at_line``) with its score less than this above the cut (in ln) is unscored, so the gate
+diverts it: a split that gave the fillet a piece of its neighbour raises its score by about that much or more in
+one such fillet in ten. Chosen on one set of live runs and checked on a disjoint one (docs/results.md)."""
+
+REASON_JOINED = ("outline split from a neighbour's at the measuring point, score {:.2f} within {:.0%} of the cut "
+                 "{:.2f}")
+
 MIN_SIGHTINGS = 3
 """Frames a track must be seen in before its end gives a verdict."""
 
@@ -208,6 +217,7 @@ class FilletGrader:
         """Feed one top-down frame; returns the verdicts decided now (side results come from :meth:`release`)."""
         self.now = max(self.now, stamp)
         decided: list[GradedFillet] = []
+        seen = [track for track in tracks if not track.unseen]
         for track in tracks:
             self._lanes[track.track_id] = track.lane
             if track.unseen:
@@ -215,7 +225,8 @@ class FilletGrader:
             evaluator = self._evaluators.get(track.track_id)
             if evaluator is None:
                 evaluator = self._evaluators[track.track_id] = ShapeEvaluator(self.edge_row, **self.evaluator_options)
-            result = evaluator.update(track.contour, stamp, track.image_contour)
+            neighbours = [_outline(other.contour) for other in seen if other.track_id != track.track_id]
+            result = evaluator.update(track.contour, stamp, track.image_contour, neighbours)
             if result is not None and result.reason == REASON_STARTED_PAST_EDGE:
                 result = self._take_over(track, stamp, result)
             if result is not None:  # a finished evaluator stays until its track ends: one verdict per track
@@ -290,6 +301,10 @@ class FilletGrader:
             result = replace(result, status=STATUS_UNSCORED, reason="; ".join(r for r in (outside, result.reason) if r))
             return GradedFillet(track_id, lane, result, LABEL_UNSCORED, "", conditions=conditions)
         decision = self.rules.classify(score, conditions)
+        if not paper and decision.label == LABEL_NORMAL and _joined_near_cut(result, score, decision.threshold):
+            reason = REASON_JOINED.format(score, math.expm1(JOINED_MARGIN_LN), decision.threshold)
+            result = replace(result, status=STATUS_UNSCORED, reason="; ".join(r for r in (reason, result.reason) if r))
+            return GradedFillet(track_id, lane, result, LABEL_UNSCORED, "", conditions=conditions)
         return GradedFillet(track_id, lane, result, decision.label, decision.grade or "", score=score,
                             conditions=conditions, threshold=decision.threshold)
 
@@ -329,6 +344,15 @@ class FilletGrader:
             if m.first_stamp - SIDE_MATCH_SLACK_S <= closing <= m.last_stamp + SIDE_MATCH_SLACK_S:
                 return self._side.pop(i)
         return None
+
+
+def _joined_near_cut(result: ShapeResult, score: float, threshold: float) -> bool:
+    """Whether a score read on joined frames lies within JOINED_MARGIN_LN above the cut (see there)."""
+    return result.joined_at_line and math.log(score / threshold) < JOINED_MARGIN_LN
+
+
+def _outline(contour: np.ndarray) -> np.ndarray:
+    return np.asarray(contour, dtype=np.int32).reshape(-1, 2)
 
 
 def _area(contour: np.ndarray) -> float:

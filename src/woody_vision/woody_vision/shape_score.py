@@ -89,6 +89,7 @@ started at or past the edge, or the track ended before the window closed).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from enum import Enum
 
@@ -138,6 +139,20 @@ TRAILING_LEAP_RATIO = 0.2
 edge should be (:meth:`ShapeEvaluator.predicted_trailing`) is a piece of an outline, not the fillet: the part of
 a tipping fillet still on the belt rides it at the belt's speed. A track that starts past the edge with its
 trailing edge within this of a lane-mate's prediction is that fillet again (woody_vision.grader_core)."""
+SPILL_RATIO = 0.1
+"""A window frame whose outline reaches across the flow beyond the reference's columns, or along it beyond the
+reference's extent, by more than this fraction of the reference's width or extent holds another fillet's outline:
+a fillet bending over the roller only shortens along the flow, and keeps its columns, on the belt plane."""
+JOIN_PX = 2
+"""Outline points this close (px, along rows or columns) to another fillet's outline touch it."""
+JOIN_MIN_POINTS = 20
+"""A window frame whose outline touches another fillet's over this many points past the bend's start was split
+from the two fillets' joined blob there (:func:`touches_past`): where the split falls in the part hanging over
+the roller is a guess, so its Φ_t may hold a piece of the neighbour or miss a piece of its own. The frame is
+scored and marked (``FrameScore.joined``); the grader decides what a score read on such frames may decide."""
+JOIN_SPAN = 0.15
+"""A line score is read on joined frames when a frame within this much overhang (× L) of the measuring point was
+joined (``ShapeResult.joined_at_line``)."""
 CONTAMINATED_RATIO = 0.5
 """A window frame whose Φ_t the rising envelope lowers below this fraction of it carried a neighbour's outline that
 the merge tests above missed: it is rejected when the line score is read. Lowered instead, it would take the value
@@ -262,6 +277,8 @@ class FrameScore:
     solidity_term: float
     overhang: float = math.nan
     """Rigid overhang (trailing edge + L − edge) as a fraction of the body length L."""
+    joined: bool = False
+    """The outline touched another fillet's past the bend's start (JOIN_MIN_POINTS)."""
 
 
 @dataclass(frozen=True)
@@ -317,6 +334,12 @@ class ShapeResult:
     window_closed: bool = False
     """Whether the paper's window closed cleanly and without a gap, so that ``phi`` is the paper's Φ."""
 
+    @property
+    def joined_at_line(self) -> bool:
+        """Whether a frame within JOIN_SPAN of the measuring point was split from a neighbour's outline."""
+        frames = self.trace + self.extra_trace
+        return any(f.joined and abs(f.overhang - self.line_fraction) <= JOIN_SPAN for f in frames)
+
 
 def flat_overlap(reference: np.ndarray, current: np.ndarray, shift_rows: int, last_row: int) -> float:
     """Intersection over union of two outlines' parts at rows up to ``last_row``, the reference moved
@@ -336,6 +359,23 @@ def flat_overlap(reference: np.ndarray, current: np.ndarray, shift_rows: int, la
     if canvas[0].sum() < FLAT_MIN_SHARE * np.count_nonzero(ref_mask):
         return math.nan
     return float(np.logical_and(*canvas).sum() / np.logical_or(*canvas).sum())
+
+
+def touches_past(outline: np.ndarray, others: Sequence[np.ndarray], first_row: float) -> bool:
+    """Whether ``outline``'s points at rows from ``first_row`` on touch one of ``others`` (JOIN_PX) at
+    JOIN_MIN_POINTS points or more."""
+    part = outline[outline[:, 1] >= first_row]
+    if len(part) < JOIN_MIN_POINTS:
+        return False
+    low, high = part.min(axis=0) - JOIN_PX, part.max(axis=0) + JOIN_PX
+    for other in others:
+        near = other[np.all((other >= low) & (other <= high), axis=1)]
+        if len(near) == 0:
+            continue
+        distance = np.abs(part[:, None, :] - near[None, :, :]).max(axis=2).min(axis=1)
+        if np.count_nonzero(distance <= JOIN_PX) >= JOIN_MIN_POINTS:
+            return True
+    return False
 
 
 def leading_end(contour: np.ndarray) -> str:
@@ -526,12 +566,13 @@ class ShapeEvaluator:
         """True once the fillet was seen flat before the edge and its reference is locked."""
         return self._reference is not None
 
-    def update(self, contour: np.ndarray, stamp: float, image_contour: np.ndarray | None = None) -> ShapeResult | None:
+    def update(self, contour: np.ndarray, stamp: float, image_contour: np.ndarray | None = None,
+               neighbours: Sequence[np.ndarray] = ()) -> ShapeResult | None:
         """Feed this frame's full contour; returns the result on the frame it is decided.
 
         ``contour`` decides the window and ``line_phi`` (the belt outline on a line); ``image_contour``, the
         outline as the camera sees it (default: ``contour``), gives the paper's Φ, which the paper measures
-        on the image."""
+        on the image. ``neighbours`` are the other fillets' outlines of this frame, like ``contour``."""
         if self._phase is _Phase.DONE:
             return None
         self._step = stamp - self._last_stamp if self._last_stamp is not None else 0.0
@@ -548,7 +589,7 @@ class ShapeEvaluator:
             if not self._lock_reference():
                 return self._finish(STATUS_UNSCORED, REASON_DEGENERATE)
             self._phase = _Phase.REFERENCED
-        return self._window_frame(points, stamp, image)
+        return self._window_frame(points, stamp, image, neighbours)
 
     def _remember_flat(self, points: np.ndarray, stamp: float, image: np.ndarray) -> None:
         self._flat = (self._flat + [(points, stamp, cv2.contourArea(points), image)])[-FLAT_HISTORY:]
@@ -569,10 +610,11 @@ class ShapeEvaluator:
         self._flat = []
         return self._reference is not None and self._image_reference is not None
 
-    def _window_frame(self, points: np.ndarray, stamp: float, image: np.ndarray) -> ShapeResult | None:
+    def _window_frame(self, points: np.ndarray, stamp: float, image: np.ndarray,
+                      neighbours: Sequence[np.ndarray]) -> ShapeResult | None:
         reference = self._reference
         trailing = int(points[:, 1].min())
-        if self._merged(points, trailing, stamp):
+        if self._merged(points, trailing, stamp) or self._spills(points):
             self._rejected += 1
             if self._trace and not self._closed:
                 self._note_gap()
@@ -583,7 +625,8 @@ class ShapeEvaluator:
         if not self._closed:
             self._note_gap()
         overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
-        frame = self._score(self._reference, clip_body(points, trailing, reference.length_px), stamp, overhang)
+        joined = touches_past(points, neighbours, self.edge_row - FLAT_MARGIN_PX)
+        frame = self._score(self._reference, clip_body(points, trailing, reference.length_px), stamp, overhang, joined)
         (self._extra if self._closed else self._trace).append(frame)
         self._contours.append(points)
         if not self._closed:
@@ -643,6 +686,15 @@ class ShapeEvaluator:
         overlap = flat_overlap(self._reference_contour, points, shift, int(self.edge_row) - FLAT_MARGIN_PX)
         return overlap < FLAT_OVERLAP_MIN
 
+    def _spills(self, points: np.ndarray) -> bool:
+        """Whether this window frame's outline reaches beyond the reference's columns or extent (SPILL_RATIO)."""
+        columns = self._reference_contour[:, 0]
+        spill = max(columns.min() - points[:, 0].min(), points[:, 0].max() - columns.max())
+        if spill > SPILL_RATIO * self._reference_width:
+            return True
+        extent, own = np.ptp(points[:, 1]), np.ptp(self._reference_contour[:, 1])
+        return extent > (1.0 + SPILL_RATIO) * own
+
     def _finish_line(self) -> ShapeResult:
         frames = self._trace + self._extra
         kept, own = own_frames(frames)
@@ -685,12 +737,13 @@ class ShapeEvaluator:
         body = clip_body(image, int(image[:, 1].min()), self._image_reference.length_px)
         return self._score(self._image_reference, body, stamp, overhang)
 
-    def _score(self, reference: ShapeReference, body: np.ndarray, stamp: float, overhang: float) -> FrameScore:
+    def _score(self, reference: ShapeReference, body: np.ndarray, stamp: float, overhang: float,
+               joined: bool = False) -> FrameScore:
         if len(body) >= 3 and cv2.contourArea(body) > 0.0:
             hu_term, solidity_term = shape_terms(reference, body)
         else:  # a degenerate contour (no area) has no shape to compare: the frame counts, its terms are NaN
             hu_term, solidity_term = math.nan, math.nan
-        return FrameScore(stamp, self.w1 * hu_term + self.w2 * solidity_term, hu_term, solidity_term, overhang)
+        return FrameScore(stamp, self.w1 * hu_term + self.w2 * solidity_term, hu_term, solidity_term, overhang, joined)
 
     def _finish(self, status: str, reason: str, line_phi: float = math.nan,
                 line_contour: np.ndarray | None = None, line_stamp: float | None = None) -> ShapeResult:
