@@ -446,13 +446,23 @@ def test_the_leading_end_is_read_along_the_fillets_own_axis_up_to_the_largest_tu
     assert leading_end(turned) == (LEADING_NARROW if narrow_first else LEADING_BLUNT)
 
 
-def merged_with_follower(contour: np.ndarray, gap_px: int = 0) -> np.ndarray:
-    """The blob of a fillet and an identical follower touching it from behind, as one contour."""
+def filled(*contours: np.ndarray) -> np.ndarray:
+    """A mask with the contours filled in."""
     mask = np.zeros((800, 800), np.uint8)
-    length = int(np.ptp(contour[:, 1]))
-    cv2.fillPoly(mask, [contour, contour - (0, length - gap_px)], 255)
+    cv2.fillPoly(mask, list(contours), 255)
+    return mask
+
+
+def outline_of(mask: np.ndarray) -> np.ndarray:
+    """The outline of the mask's largest blob."""
     outline, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     return max(outline, key=cv2.contourArea).reshape(-1, 2)
+
+
+def merged_with_follower(contour: np.ndarray, gap_px: int = 0) -> np.ndarray:
+    """The blob of a fillet and an identical follower touching it from behind, as one contour."""
+    length = int(np.ptp(contour[:, 1]))
+    return outline_of(filled(contour, contour - (0, length - gap_px)))
 
 
 def test_a_window_frame_merged_with_the_follower_is_rejected_not_scored():
@@ -468,11 +478,9 @@ def test_a_window_frame_merged_with_the_follower_is_rejected_not_scored():
 
 def with_box(contour: np.ndarray, u0: int, v0: int, u1: int, v1: int) -> np.ndarray:
     """One outline of the contour's area and a box joined to it."""
-    mask = np.zeros((800, 800), np.uint8)
-    cv2.fillPoly(mask, [contour], 255)
+    mask = filled(contour)
     cv2.rectangle(mask, (int(u0), int(v0)), (int(u1), int(v1)), 255, -1)
-    outline, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    return max(outline, key=cv2.contourArea).reshape(-1, 2)
+    return outline_of(mask)
 
 
 def test_a_window_frame_reaching_beyond_the_fillets_columns_or_length_is_rejected():
