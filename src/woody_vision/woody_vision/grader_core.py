@@ -217,7 +217,7 @@ class FilletGrader:
         """Feed one top-down frame; returns the verdicts decided now (side results come from :meth:`release`)."""
         self.now = max(self.now, stamp)
         decided: list[GradedFillet] = []
-        seen = [track for track in tracks if not track.unseen]
+        outlines = {track.track_id: _outline(track.contour) for track in tracks if not track.unseen}
         for track in tracks:
             self._lanes[track.track_id] = track.lane
             if track.unseen:
@@ -225,7 +225,7 @@ class FilletGrader:
             evaluator = self._evaluators.get(track.track_id)
             if evaluator is None:
                 evaluator = self._evaluators[track.track_id] = ShapeEvaluator(self.edge_row, **self.evaluator_options)
-            neighbours = [_outline(other.contour) for other in seen if other.track_id != track.track_id]
+            neighbours = [outline for other, outline in outlines.items() if other != track.track_id]
             result = evaluator.update(track.contour, stamp, track.image_contour, neighbours)
             if result is not None and result.reason == REASON_STARTED_PAST_EDGE:
                 result = self._take_over(track, stamp, result)

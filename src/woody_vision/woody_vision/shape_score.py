@@ -67,8 +67,13 @@ a fillet side by side in the next lane); one whose trailing edge lies ahead of
 where the fillet's own should be by now is a piece of an outline (a track that
 took a sliver split off at the edge); one whose centroid has moved across
 the flow by more than ``LATERAL_JUMP_RATIO`` × the reference's width is
-another fillet's blob (a track that switched fillets after a merge). Either
-is rejected, never scored, and counted. If the frames left around the
+another fillet's blob (a track that switched fillets after a merge); one that
+reaches beyond the reference's columns or length by more than ``SPILL_RATIO``
+holds another fillet's outline (on the belt plane a fillet bending over the
+roller only shortens along the flow). Each is rejected, never scored, and
+counted. A frame whose outline touches another fillet's past the bend's start
+is scored and marked joined (``JOIN_MIN_POINTS``): the split between them
+there is a guess, and the grader decides what such a score may decide. If the frames left around the
 measuring point are too far apart, the point is read on the line through the two clean frames nearest it on
 one side (:func:`extrapolate_at`) when the nearer lies within a frame's advance of it; else the fillet is
 unscored with the reason. The reference is likewise the latest
