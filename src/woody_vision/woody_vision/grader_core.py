@@ -228,7 +228,7 @@ class FilletGrader:
             neighbours = [outline for other, outline in outlines.items() if other != track.track_id]
             result = evaluator.update(track.contour, stamp, track.image_contour, neighbours)
             if result is not None and result.reason == REASON_STARTED_PAST_EDGE:
-                result = self._take_over(track, stamp, result)
+                result = self._take_over(track, stamp, result, neighbours)
             if result is not None:  # a finished evaluator stays until its track ends: one verdict per track
                 decided += self._decide(track.track_id, result, _area(track.contour))
         for track_id in ended_ids:
@@ -308,12 +308,13 @@ class FilletGrader:
         return GradedFillet(track_id, lane, result, decision.label, decision.grade or "", score=score,
                             conditions=conditions, threshold=decision.threshold)
 
-    def _take_over(self, track: TrackObservation, stamp: float, started_past: ShapeResult) -> ShapeResult | None:
+    def _take_over(self, track: TrackObservation, stamp: float, started_past: ShapeResult,
+                   neighbours: list[np.ndarray]) -> ShapeResult | None:
         """A track that starts past the edge with its trailing edge where a referenced fillet of its lane should
         have it now is that fillet, which its own track lost as it tipped (it took a piece split off at the edge,
         or went unseen): the new track carries on that fillet's evaluation, so the fillet gets its one verdict
         (none more if it already had it). Else the new track's own result, ``started_past``."""
-        trailing = float(np.asarray(track.contour).reshape(-1, 2)[:, 1].min())
+        trailing = float(_outline(track.contour)[:, 1].min())
         owner = next((other for other, evaluator in self._evaluators.items()
                       if other != track.track_id and self._lanes.get(other) == track.lane
                       and evaluator.continues_at(trailing, stamp)), None)
@@ -321,7 +322,7 @@ class FilletGrader:
             return started_past
         evaluator = self._evaluators[track.track_id] = self._evaluators.pop(owner)
         self.taken_over += 1
-        return evaluator.update(track.contour, stamp, track.image_contour)
+        return evaluator.update(track.contour, stamp, track.image_contour, neighbours)
 
     def _is_piece(self, lane: int, track_id: int, area_px: float) -> bool:
         """Whether a track that first appears past the edge, or ends before its body reaches it, is a piece of a
@@ -356,4 +357,4 @@ def _outline(contour: np.ndarray) -> np.ndarray:
 
 
 def _area(contour: np.ndarray) -> float:
-    return float(cv2.contourArea(np.asarray(contour, dtype=np.int32).reshape(-1, 1, 2)))
+    return float(cv2.contourArea(_outline(contour)))
