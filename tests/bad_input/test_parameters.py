@@ -87,6 +87,8 @@ NODE_REFUSALS = {  # command: what its one line says
     ros_args("line_sim", "spawn_spacing_m:=0.1"): "spawn_spacing_m",
     ros_args("line_sim", "speed_change_fpm:=0.5"): "speed_change_fpm must be 0 or within 1..400",
     ros_args("line_sim", "scale_min:=1.3"): "scale_max must be >= scale_min 1.3",
+    ros_args("line_sim", "physics_workers:=0", "physics_recycle_fillets:=300"):
+        "physics_recycle_fillets needs physics_workers >= 1",
     ros_args("line_sim", "top_camera_mount:=[0.0, 0.0, 0.75, 0.0, 0.0, 0.0, 2.0]"):
         "top_camera_mount must be [x, y, z, qx, qy, qz, qw] with a unit quaternion",
     ros_args("grader", "side_lane:=4"): "side_lane 4 is not a lane (0..2)",

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from conftest import spin_until
@@ -220,3 +222,16 @@ def test_line_sim_takes_a_coarser_physics_step_and_chain_when_asked(ros_domain, 
         sim.stop()
     log = sim.log_path.read_text()
     assert "physics dt=2.78 ms, 30 segments, 10 solver iterations" in log
+
+
+def test_line_sim_recycles_its_physics_workers_when_asked(ros_domain, tmp_path):
+    """With physics_recycle_fillets every fillet is simulated in a worker, and a worker that has taken that many is
+    replaced by a fresh process while the line runs (a shift keeps its memory flat, docs/physics.md)."""
+    sim = NodeProcess("line_sim", {"duration_s": 2.5, "physics_recycle_fillets": 2, "side_rate_hz": 0.0},
+                      domain_id=ros_domain, log_dir=tmp_path)
+    try:
+        assert sim.process.wait(180) == 0, sim.log_tail()
+    finally:
+        sim.stop()
+    started = re.search(r"physics workers: (\d+) started, each replaced after 2 fillets", sim.log_path.read_text())
+    assert started and int(started.group(1)) >= 2, sim.log_tail()  # 9 fillets: when a successor is up is timing

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -105,7 +106,6 @@ def test_the_worker_ends_when_its_parent_is_killed():
     """A line_sim killed with SIGKILL leaves no physics worker behind."""
     import subprocess
     import sys
-    import time
 
     script = ("import sys, time\n"
               "from woody_sim.line_geometry import LineGeometry\n"
@@ -166,3 +166,62 @@ def test_each_spawn_goes_where_the_fewest_fillets_live_and_moves_as_alone(meshes
 def test_more_workers_than_cores_are_refused():
     with pytest.raises(ValueError, match="cores of this machine"):
         SplitLineWorld(GEOMETRY, calibrated_config(), workers=(os.cpu_count() or 1) + 1)
+
+
+def run_to(world, steps: int) -> dict[int, np.ndarray]:
+    """Step to ``steps`` as line_sim does (plan, step, poses) and return the poses there."""
+    world.plan(steps * world.config.dt)
+    while world.steps < steps:
+        world.step()
+    return world.segment_poses()
+
+
+def wait_for_successors(world: SplitLineWorld) -> None:
+    """Until every successor has started and taken its worker's place (a spawn checks; here, a busy wait)."""
+    deadline = time.monotonic() + 30.0
+    while world._successors and time.monotonic() < deadline:
+        time.sleep(0.05)
+        world._take_up_successors()
+    assert not world._successors
+
+
+def test_a_recycled_worker_hands_over_to_a_fresh_process_and_ends_once_its_fillets_are_gone(meshes):
+    """With recycling, every spawn goes to a worker; at its first spawn (recycle_after 1) a successor starts, takes
+    the next spawns once it has answered, joins the line's clock where it is, and the old process ends once its
+    chain has left. Both chains, in the old process and the new, move as lone ones."""
+    with SplitLineWorld(GEOMETRY, calibrated_config(), recycle_after=1) as world:
+        first = world.spawn(meshes[1], 100.0, 1, MASS, SPEED)
+        old_pid = world.worker_pids[0]
+        run_to(world, 40)
+        wait_for_successors(world)
+        late = world.spawn(meshes[2], 0.0, 2, MASS, SPEED)
+        assert world._workers[0].models.keys() == {late}
+        assert world.workers_started == 3  # the successor took its one spawn too: its own successor is starting
+        assert sorted(world.worker_pids) == sorted([old_pid, world._workers[0].process.pid])
+        assert not world._local.fillets
+        poses = run_to(world, 330)
+        assert np.array_equal(poses[first], alone(meshes[1], 100.0, 1, 0, 330))
+        assert np.array_equal(poses[late], alone(meshes[2], 0.0, 2, 40, 330))
+        deadline = time.monotonic() + 30.0  # the chain leaves within 2 sim-s, and a process ends in under 1 s
+        while (world._retiring or world._ending) and time.monotonic() < deadline:
+            run_to(world, world.steps + 60)
+            time.sleep(0.01)
+        assert old_pid not in world.worker_pids and not world._retiring and not world._ending
+        assert not os.path.exists(f"/proc/{old_pid}")
+
+
+def test_a_successor_follows_a_belt_speed_change_asked_before_it_started(meshes):
+    """A speed change planned for later reaches a worker started after it was asked for."""
+    change = 60 * calibrated_config().dt
+    with SplitLineWorld(GEOMETRY, calibrated_config(), recycle_after=1) as world:
+        world.change_speed(0.66, change)
+        world.spawn(meshes[0], 0.0, 0, MASS, SPEED)
+        wait_for_successors(world)
+        late = world.spawn(meshes[1], 0.0, 1, MASS, SPEED)
+        poses = run_to(world, 120)
+    with LineWorld(GEOMETRY, calibrated_config()) as lone:
+        lone.change_speed(0.66, change)
+        fid = lone.spawn(meshes[1], 0.0, 1, MASS, SPEED)
+        while lone.steps < 120:
+            lone.step()
+        assert np.array_equal(poses[late], lone.segment_poses()[fid])

@@ -141,9 +141,7 @@ class LineSim(Node):
                             "while a segment holds the belt speed.", 0.0, 10.0)
         mu_dynamic = declare(self, "friction_dynamic", calibrated["friction_dynamic"], "Coulomb cap of the belt drive "
                              "once a segment slips.", 0.0, 10.0)
-        workers = declare(self, "physics_workers", 1, "Worker processes that share the physics with this one, "
-                          "each spawn going to the process with the fewest live fillets (0 = all physics in this "
-                          "process; at most the core count).", 0, MAX_PHYSICS_WORKERS)
+        workers, recycle = self._declare_workers()
         physics = self._declare_physics()
         top_camera, top_rate = self._declare_top_camera()
         side_rate = declare(self, "side_rate_hz", 60.0, "Side camera frame rate (Hz); 0 disables it.", 0.0,
@@ -169,8 +167,22 @@ class LineSim(Node):
         return SimpleNamespace(
             lanes=lanes, speed_fpm=speed_fpm, mesh_spec=mesh_spec, seed=seed,
             damping=damping, mu_static=mu_static, mu_dynamic=mu_dynamic, physics=physics, workers=workers,
-            top_rate=top_rate, side_rate=side_rate, side_idle=side_idle, side_lane=side_lane,
+            recycle=recycle, top_rate=top_rate, side_rate=side_rate, side_idle=side_idle, side_lane=side_lane,
             top_camera=top_camera, max_lead=max_lead)
+
+    def _declare_workers(self) -> tuple[int, int]:
+        """The physics worker processes, and after how many fillets each is replaced (woody_sim.split_world)."""
+        workers = declare(self, "physics_workers", 1, "Worker processes that share the physics with this one, "
+                          "each spawn going to the process with the fewest live fillets (0 = all physics in this "
+                          "process; at most the core count).", 0, MAX_PHYSICS_WORKERS)
+        recycle = declare(self, "physics_recycle_fillets", 0, "Replace each physics worker process with a fresh one "
+                          "after it has taken this many fillets, so that a line running for hours keeps its memory "
+                          "flat; the physics then runs in the workers only (0 = never; needs physics_workers >= 1).",
+                          0, 1_000_000)
+        if recycle and not workers:
+            raise ValueError("physics_recycle_fillets needs physics_workers >= 1: only a worker process can be "
+                             "replaced")
+        return workers, recycle
 
     def _declare_physics(self) -> dict:
         """The chain's resolution and the physics step: PhysicsConfig fields (docs/physics.md, "What each setting
@@ -291,7 +303,8 @@ class LineSim(Node):
         self.speed = fpm_to_mps(p.speed_fpm)
         config = PhysicsConfig(**p.physics, damping=p.damping, friction_static=p.mu_static,
                                friction_dynamic=p.mu_dynamic)
-        self.world = (SplitLineWorld(self.geometry, config, p.workers, start_method=CHILD_START)
+        self.world = (SplitLineWorld(self.geometry, config, p.workers, start_method=CHILD_START,
+                                     recycle_after=p.recycle)
                       if p.workers else LineWorld(self.geometry, config))
         self.top_period = 1.0 / p.top_rate
         self.side_period = 1.0 / p.side_rate if p.side_rate > 0 else None
@@ -516,6 +529,9 @@ class LineSim(Node):
         self.get_logger().info(f"stopped at sim time {self.world.time:.2f} s after {elapsed:.1f} s wall "
                                f"(rtf {(self.world.time - sim_start) / max(elapsed, 1e-9):.2f}x), "
                                f"{self.spawned} fillets spawned")
+        if isinstance(self.world, SplitLineWorld) and self.world.recycle_after:
+            self.get_logger().info(f"physics workers: {self.world.workers_started} started, each replaced after "
+                                   f"{self.world.recycle_after} fillets")
         self.get_logger().info(phases.summary())
         executor.remove_node(self)
         return 0

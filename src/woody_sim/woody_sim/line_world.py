@@ -545,6 +545,14 @@ class LineWorld:
         """Physics steps taken so far (``time`` is ``steps * config.dt``)."""
         return self._steps
 
+    def start_at(self, step: int) -> None:
+        """Start a new world's clock at ``step`` of a running line (a worker world that joins it late), instead of
+        stepping an empty world there."""
+        if self._steps or self._fillets or step < 0:
+            raise ValueError(f"only a new world's clock can be started, at a step >= 0 (got {step})")
+        self._steps = int(step)
+        self.time = self._steps * self.config.dt
+
     def plan(self, until: float) -> None:
         """Nothing to do: a single world steps all its fillets itself (the interface of
         :meth:`~woody_sim.split_world.SplitLineWorld.plan`, which starts its worker on the steps to ``until``)."""

@@ -30,10 +30,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from woody_common.line import PAPER_SPEEDS_FPM, REFERENCE_SPEED_FPM, fpm_to_mps
+from woody_sim.frame_schedule import DUE_SLACK
 from woody_sim.line_conditions import line_preset, place_mesh, placement_for
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.line_world import LineWorld, PhysicsConfig
 from woody_sim.meshes import FilletMesh
+from woody_sim.split_world import SplitLineWorld
 
 SOAK_K = (0.0, 10.0, 20.0, 40.0, 100.0, 200.0, 400.0)
 SOAK_MASSES = (2.0, 10.0, 30.0, 100.0, 300.0)
@@ -139,9 +141,14 @@ SHIFT_SPACING_M = 0.45
 """In-lane spacing of the shift soak's line: the messy line's default (woody run)."""
 
 
+SHIFT_FRAME_S = 1.0 / 30.0
+"""The shift soak asks for every chain's pose this often, as line_sim's top camera does (a split world's workers
+step towards each such request)."""
+
+
 @dataclass
 class ShiftResult:
-    """A long messy line through one LineWorld: what its process held as it ran."""
+    """A long messy line through one physics world or recycled workers: what its processes held as it ran."""
 
     fillets: int = 0
     blowups: int = 0
@@ -149,40 +156,64 @@ class ShiftResult:
     wall_s: float = 0.0
     rss_mb: list[tuple[int, float]] = field(default_factory=list)
     """(fillets gone, this process's resident memory MB) at every sample."""
+    worker_rss_mb: list[tuple[int, float]] = field(default_factory=list)
+    """(fillets gone, the largest resident memory MB of a physics worker then) at every sample (workers only)."""
+    workers_started: int = 0
 
 
 def shift(meshes: list[FilletMesh], fillets: int, mass: float, lanes: int = 3, speed_fpm: float = REFERENCE_SPEED_FPM,
           seed: int = 0, samples: int = 20, config: PhysicsConfig | None = None,
-          progress: Callable[[int], None] | None = None) -> ShiftResult:
+          progress: Callable[[int], None] | None = None, workers: int = 0, recycle_after: int = 0) -> ShiftResult:
     """Run ``fillets`` placed fillets of a messy line (each turned, sized and offset its own way, woody_sim.
-    line_conditions) through one LineWorld, as line_sim does for hours, sampling this process's resident memory
-    ``samples`` times as they leave; each placed mesh is released once its fillet is gone, as line_sim does."""
+    line_conditions) as line_sim does for hours: through one LineWorld in this process (``workers`` 0), or over
+    ``workers`` physics worker processes, each replaced after ``recycle_after`` spawns (0: never; woody_sim.
+    split_world). Samples the resident memory of this process and of the workers ``samples`` times as the
+    fillets leave; each placed mesh is released once its fillet is gone, as line_sim does."""
     geometry = LineGeometry(lanes=lanes)
     speed = fpm_to_mps(speed_fpm)
-    conditions = line_preset("messy")
+    line = (line_preset("messy"), seed, mass)
     result = ShiftResult()
     placed: dict[int, FilletMesh] = {}
     every = max(1, fillets // samples)
     wall0, next_wave, spawned = time.perf_counter(), 0.0, 0
-    with LineWorld(geometry, config) as world:
+    world = (SplitLineWorld(geometry, config or PhysicsConfig(), workers, recycle_after=recycle_after) if workers
+             else LineWorld(geometry, config))
+    with world:
         while result.fillets < fillets:
             if world.time >= next_wave and spawned < fillets:
-                spawned = _spawn_wave(world, meshes, (conditions, seed, mass), spawned, speed, placed)
+                spawned = _spawn_wave(world, meshes, line, spawned, speed, placed)
                 next_wave += SHIFT_SPACING_M / speed
-            world.step()
+            _step_frame(world)
             for fillet_id in world.take_removed():
                 world.release(placed.pop(fillet_id))
                 result.fillets += 1
                 if result.fillets % every == 0:
-                    result.rss_mb.append((result.fillets, resident_mb()))
+                    _sample_memory(world, result)
                 if progress is not None:
                     progress(1)
         result.blowups, result.sim_s = len(world.blown_up), world.time
+        result.workers_started = world.workers_started if isinstance(world, SplitLineWorld) else 0
     result.wall_s = time.perf_counter() - wall0
     return result
 
 
-def _spawn_wave(world: LineWorld, meshes: list[FilletMesh], line: tuple, spawned: int, speed: float,
+def _step_frame(world: LineWorld | SplitLineWorld) -> None:
+    """Step to the next camera frame and take every pose there, as line_sim does."""
+    until = world.time + SHIFT_FRAME_S
+    world.plan(until)
+    while world.time + DUE_SLACK < until:
+        world.step()
+    world.segment_poses()
+
+
+def _sample_memory(world: LineWorld | SplitLineWorld, result: ShiftResult) -> None:
+    result.rss_mb.append((result.fillets, resident_mb()))
+    pids = world.worker_pids if isinstance(world, SplitLineWorld) else []
+    if pids:
+        result.worker_rss_mb.append((result.fillets, max(resident_mb(pid) for pid in pids)))
+
+
+def _spawn_wave(world: LineWorld | SplitLineWorld, meshes: list[FilletMesh], line: tuple, spawned: int, speed: float,
                 placed: dict[int, FilletMesh]) -> int:
     """One fillet per lane, each placed its own way (``line``: the conditions, seed and mass M); returns the
     fillets spawned so far."""
@@ -198,10 +229,10 @@ def _spawn_wave(world: LineWorld, meshes: list[FilletMesh], line: tuple, spawned
     return spawned
 
 
-def resident_mb() -> float:
-    """This process's resident memory (MB, Linux /proc; NaN elsewhere)."""
+def resident_mb(pid: int | str = "self") -> float:
+    """A process's resident memory (MB, Linux /proc; NaN elsewhere or once it has ended): this one by default."""
     try:
-        with open("/proc/self/status") as status:
+        with open(f"/proc/{pid}/status") as status:
             return next(int(line.split()[1]) / 1024.0 for line in status if line.startswith("VmRSS"))
     except (OSError, StopIteration):
         return math.nan

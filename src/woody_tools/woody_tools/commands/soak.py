@@ -23,7 +23,7 @@ from woody_common.line import MAX_LANES, REFERENCE_SPEED_FPM, fpm_to_mps
 from woody_experiments import soak
 from woody_experiments.mesh_sets import load_meshes
 from woody_sim.line_world import calibrated_config
-from woody_sim.soak import SHIFT_SPACING_M, growth_mb_per_1000, shift
+from woody_sim.soak import SHIFT_SPACING_M, ShiftResult, growth_mb_per_1000, shift
 
 MAX_SHIFT_FILLETS = 1_000_000
 
@@ -41,6 +41,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "way) through one physics world, as line_sim runs for hours, printing the process's "
                              "resident memory as they leave and its growth per 1,000 fillets")
     parser.add_argument("--lanes", type=int, default=3, help="with --shift: lanes, 1-6 (default 3)")
+    parser.add_argument("--physics-workers", type=int, default=0, metavar="N",
+                        help="with --shift: run the physics in N worker processes, as line_sim's physics_workers "
+                             "(default 0: in this process)")
+    parser.add_argument("--recycle-after", type=int, default=0, metavar="FILLETS",
+                        help="with --shift and --physics-workers: replace each worker after it has taken FILLETS "
+                             "fillets, as line_sim's physics_recycle_fillets (default 0: never)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -78,25 +84,41 @@ def run_shift(args: argparse.Namespace) -> int:
     """The shift soak (``--shift``): one LineWorld in this process over a long messy line; exit 1 on a blow-up."""
     from tqdm import tqdm
 
-    meshes = _checked_meshes(args, f"--shift must be 1..{MAX_SHIFT_FILLETS} and --lanes 1..{MAX_LANES}",
-                             1 <= args.shift <= MAX_SHIFT_FILLETS and 1 <= args.lanes <= MAX_LANES)
+    rule = (f"--shift must be 1..{MAX_SHIFT_FILLETS}, --lanes 1..{MAX_LANES}, --physics-workers 0..{os.cpu_count()} "
+            "(the cores) and --recycle-after >= 0 (above 0 with --physics-workers >= 1)")
+    ok = (1 <= args.shift <= MAX_SHIFT_FILLETS and 1 <= args.lanes <= MAX_LANES
+          and 0 <= args.physics_workers <= (os.cpu_count() or 1)
+          and (args.recycle_after == 0 or (args.recycle_after > 0 and args.physics_workers >= 1)))
+    meshes = _checked_meshes(args, rule, ok)
     if meshes is None:
         return 2
     calibration = resolved_calibration()
     with tqdm(total=args.shift, unit="fillet", file=sys.stderr, dynamic_ncols=True) as bar:
         result = shift(list(meshes.values()), args.shift, calibration.total_mass_kg, lanes=args.lanes,
-                       seed=args.seed, config=calibrated_config(calibration), progress=bar.update)
+                       seed=args.seed, config=calibrated_config(calibration), progress=bar.update,
+                       workers=args.physics_workers, recycle_after=args.recycle_after)
+    growth, worker_growth = growth_mb_per_1000(result.rss_mb), growth_mb_per_1000(result.worker_rss_mb)
+    _print_memory(result, args.lanes, growth, worker_growth)
+    if args.json_path:
+        figures = vars(result) | {"growth_mb_per_1000": growth, "worker_growth_mb_per_1000": worker_growth}
+        Path(args.json_path).write_text(json.dumps(figures, indent=2) + "\n")
+    return 1 if result.blowups else 0
+
+
+def _print_memory(result: ShiftResult, lanes: int, growth: float, worker_growth: float) -> None:
+    """The memory samples, and the growth per 1,000 fillets and per hour of this line."""
+    workers = dict(result.worker_rss_mb)
     for gone, rss in result.rss_mb:
-        print(f"  {gone:6d} fillets gone: {rss:7.1f} MB")
-    growth = growth_mb_per_1000(result.rss_mb)
-    hour = args.lanes * fpm_to_mps(REFERENCE_SPEED_FPM) / SHIFT_SPACING_M * 3600.0
+        there = f", largest physics worker {workers[gone]:7.1f} MB" if gone in workers else ""
+        print(f"  {gone:6d} fillets gone: {rss:7.1f} MB{there}")
+    hour = lanes * fpm_to_mps(REFERENCE_SPEED_FPM) / SHIFT_SPACING_M * 3600.0
     print(f"shift: {result.fillets} messy fillets, {result.blowups} blow-ups, {result.sim_s:.0f} sim-s in "
           f"{result.wall_s:.0f} s; resident memory {growth:+.1f} MB per 1,000 fillets over the second half "
-          f"({growth * hour / 1000.0:+.0f} MB per hour of a {args.lanes}-lane line at 100 FPM, "
+          f"({growth * hour / 1000.0:+.0f} MB per hour of a {lanes}-lane line at 100 FPM, "
           f"{SHIFT_SPACING_M:g} m apart: {hour:.0f} fillets)")
-    if args.json_path:
-        Path(args.json_path).write_text(json.dumps(vars(result) | {"growth_mb_per_1000": growth}, indent=2) + "\n")
-    return 1 if result.blowups else 0
+    if result.worker_rss_mb:
+        print(f"physics workers: {result.workers_started} started; the largest {worker_growth:+.1f} MB per 1,000 "
+              "fillets over the second half")
 
 
 def _checked_meshes(args: argparse.Namespace, rule: str, ok: bool) -> dict | None:
