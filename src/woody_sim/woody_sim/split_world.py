@@ -35,7 +35,14 @@ from woody_sim.child_process import ChildProcess, parent_messages
 from woody_sim.fillet_model import FilletModel
 from woody_sim.frame_schedule import DUE_SLACK
 from woody_sim.line_geometry import LineGeometry
-from woody_sim.line_world import LineWorld, PhysicsConfig, check_fillet_id, check_lateral_offset, check_spawn
+from woody_sim.line_world import (
+    LineWorld,
+    PhysicsConfig,
+    check_fillet_id,
+    check_lateral_offset,
+    check_spawn,
+    return_freed_memory,
+)
 from woody_sim.meshes import FilletMesh
 
 MAX_PHYSICS_WORKERS = 64
@@ -260,6 +267,7 @@ class SplitLineWorld:
         for worker in [w for w in self._ending if not w.process.is_alive()]:
             self._ending.remove(worker)
             worker.process.close()
+            return_freed_memory()  # the meshes and chain models this process built for its fillets
 
     def model(self, fillet_id: int) -> FilletModel:
         for worker in self._stepping():

@@ -24,6 +24,7 @@ from woody_experiments import soak
 from woody_experiments.mesh_sets import load_meshes
 from woody_sim.line_world import calibrated_config
 from woody_sim.soak import SHIFT_SPACING_M, ShiftResult, growth_mb_per_1000, shift
+from woody_sim.split_world import MAX_PHYSICS_WORKERS
 
 MAX_SHIFT_FILLETS = 1_000_000
 
@@ -81,13 +82,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_shift(args: argparse.Namespace) -> int:
-    """The shift soak (``--shift``): one LineWorld in this process over a long messy line; exit 1 on a blow-up."""
+    """The shift soak (``--shift``): a long messy line through one LineWorld in this process or recycled physics
+    workers; exit 1 on a blow-up."""
     from tqdm import tqdm
 
-    rule = (f"--shift must be 1..{MAX_SHIFT_FILLETS}, --lanes 1..{MAX_LANES}, --physics-workers 0..{os.cpu_count()} "
+    cores = min(os.cpu_count() or 1, MAX_PHYSICS_WORKERS)
+    rule = (f"--shift must be 1..{MAX_SHIFT_FILLETS}, --lanes 1..{MAX_LANES}, --physics-workers 0..{cores} "
             "(the cores) and --recycle-after >= 0 (above 0 with --physics-workers >= 1)")
-    ok = (1 <= args.shift <= MAX_SHIFT_FILLETS and 1 <= args.lanes <= MAX_LANES
-          and 0 <= args.physics_workers <= (os.cpu_count() or 1)
+    ok = (1 <= args.shift <= MAX_SHIFT_FILLETS and 1 <= args.lanes <= MAX_LANES and 0 <= args.physics_workers <= cores
           and (args.recycle_after == 0 or (args.recycle_after > 0 and args.physics_workers >= 1)))
     meshes = _checked_meshes(args, rule, ok)
     if meshes is None:
