@@ -163,12 +163,14 @@ class ShiftResult:
 
 def shift(meshes: list[FilletMesh], fillets: int, mass: float, lanes: int = 3, speed_fpm: float = REFERENCE_SPEED_FPM,
           seed: int = 0, samples: int = 20, config: PhysicsConfig | None = None,
-          progress: Callable[[int], None] | None = None, workers: int = 0, recycle_after: int = 0) -> ShiftResult:
+          progress: Callable[[int], None] | None = None, workers: int = 0, recycle_after: int = 0,
+          on_sample: Callable[[ShiftResult], None] | None = None) -> ShiftResult:
     """Run ``fillets`` placed fillets of a messy line (each turned, sized and offset its own way, woody_sim.
     line_conditions) as line_sim does for hours: through one LineWorld in this process (``workers`` 0), or over
     ``workers`` physics worker processes, each replaced after ``recycle_after`` spawns (0: never; woody_sim.
     split_world). Samples the resident memory of this process and of the workers ``samples`` times as the
-    fillets leave; each placed mesh is released once its fillet is gone, as line_sim does."""
+    fillets leave (``on_sample`` hears of each); each placed mesh is released once its fillet is gone, as
+    line_sim does."""
     geometry = LineGeometry(lanes=lanes)
     speed = fpm_to_mps(speed_fpm)
     line = (line_preset("messy"), seed, mass)
@@ -189,6 +191,8 @@ def shift(meshes: list[FilletMesh], fillets: int, mass: float, lanes: int = 3, s
                 result.fillets += 1
                 if result.fillets % every == 0:
                     _sample_memory(world, result)
+                    if on_sample is not None:
+                        on_sample(result)
                 if progress is not None:
                     progress(1)
         result.blowups, result.sim_s = len(world.blown_up), world.time

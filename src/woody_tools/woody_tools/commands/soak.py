@@ -98,7 +98,8 @@ def run_shift(args: argparse.Namespace) -> int:
     with tqdm(total=args.shift, unit="fillet", file=sys.stderr, dynamic_ncols=True) as bar:
         result = shift(list(meshes.values()), args.shift, calibration.total_mass_kg, lanes=args.lanes,
                        seed=args.seed, config=calibrated_config(calibration), progress=bar.update,
-                       workers=args.physics_workers, recycle_after=args.recycle_after)
+                       workers=args.physics_workers, recycle_after=args.recycle_after,
+                       on_sample=lambda sampled: bar.write(_sample_line(sampled)))
     growth, worker_growth = growth_mb_per_1000(result.rss_mb), growth_mb_per_1000(result.worker_rss_mb)
     _print_memory(result, args.lanes, growth, worker_growth)
     if args.json_path:
@@ -107,12 +108,16 @@ def run_shift(args: argparse.Namespace) -> int:
     return 1 if result.blowups else 0
 
 
-def _print_memory(result: ShiftResult, lanes: int, growth: float, worker_growth: float) -> None:
-    """The memory samples, and the growth per 1,000 fillets and per hour of this line."""
+def _sample_line(result: ShiftResult) -> str:
+    """The latest memory sample, as the soak goes (a shift runs for hours)."""
+    gone, rss = result.rss_mb[-1]
     workers = dict(result.worker_rss_mb)
-    for gone, rss in result.rss_mb:
-        there = f", largest physics worker {workers[gone]:7.1f} MB" if gone in workers else ""
-        print(f"  {gone:6d} fillets gone: {rss:7.1f} MB{there}")
+    there = f", largest physics worker {workers[gone]:7.1f} MB" if gone in workers else ""
+    return f"  {gone:6d} fillets gone: {rss:7.1f} MB{there}"
+
+
+def _print_memory(result: ShiftResult, lanes: int, growth: float, worker_growth: float) -> None:
+    """The growth per 1,000 fillets and per hour of this line (the samples went out as they were taken)."""
     hour = lanes * fpm_to_mps(REFERENCE_SPEED_FPM) / SHIFT_SPACING_M * 3600.0
     print(f"shift: {result.fillets} messy fillets, {result.blowups} blow-ups, {result.sim_s:.0f} sim-s in "
           f"{result.wall_s:.0f} s; resident memory {growth:+.1f} MB per 1,000 fillets over the second half "
