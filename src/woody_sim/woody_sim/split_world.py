@@ -14,12 +14,12 @@ for each worker. Spawns reach a worker a few steps late and are placed where the
 poses, so :meth:`SplitLineWorld.take_removed` names them after the next pose request. A belt speed change is
 sent to every world before a worker can have passed its step, so all apply it at the same step.
 
-A line that runs for hours recycles its workers (``recycle_after``): pybullet keeps native memory for every
-fillet a world has simulated (docs/physics.md, "A whole shift"), and only ending its process gives it back. A
-worker that has taken ``recycle_after`` spawns gets a successor, started at once; the old one takes spawns until
-the successor has imported and answered, so the line never waits for a process to start, then only steps its
-last fillets and ends once they are gone. The physics then runs in the workers only: this process's world
-takes no spawns, since it cannot be replaced.
+A line that runs for hours can recycle its workers (``recycle_after``): whatever a process keeps of the fillets
+it has simulated (pybullet's memory of removed bodies, the allocator's fragmentation; docs/physics.md, "A whole
+shift") ends with the process. A worker that has taken ``recycle_after`` spawns gets a successor, started at
+once; the old one takes spawns until the successor has imported and answered, so the line never waits for a
+process to start, then only steps its last fillets and ends once they are gone. The physics then runs in the
+workers only: this process's world takes no spawns, since it cannot be replaced.
 """
 
 from __future__ import annotations
