@@ -182,7 +182,7 @@ RELEASES_PER_COLLECT = 50
 """A world runs Python's full garbage collection after releasing this many placed meshes (:meth:`LineWorld.release`).
 A trimesh is in a reference cycle with its visuals, so only the cyclic collector frees a placed mesh; a fillet's
 mesh lives for seconds, long enough to reach the oldest generation, whose collections come rarer as a line runs.
-Without this a messy line's process grew by 60-80 MB per 1,000 fillets (`woody soak --shift`); one collection
+Without this a messy line's process grew by 60-100 MB per 1,000 fillets (`woody soak --shift`); one collection
 costs tens of milliseconds."""
 CHAINS_PER_PHYSICS = 200
 """Chains one pybullet world builds before later ones go to a fresh world (:class:`_Physics`)."""
