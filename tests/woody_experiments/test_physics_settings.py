@@ -1,4 +1,4 @@
-"""The physics settings table: each setting's cost beside the default's, and how far it moves each score."""
+"""The physics settings table: each setting's cost beside the paper chain's, and how far it moves each score."""
 
 from __future__ import annotations
 
@@ -21,13 +21,13 @@ def test_a_spawn_offset_moves_the_fillet_down_the_belt_and_its_frames_with_it():
     assert later["line_phi"] == pytest.approx(base["line_phi"], rel=0.5)
 
 
-def test_the_default_moves_nothing_and_a_coarser_step_is_cheaper_and_moves_the_scores(monkeypatch):
+def test_the_reference_moves_nothing_and_a_coarser_step_is_cheaper_and_moves_the_scores(monkeypatch):
     monkeypatch.setattr(physics_settings, "SETTINGS",
-                        {physics_settings.DEFAULT: {}, "240 Hz": {"dt": 1.0 / 240.0}})
-    costs = iter([2.0, 1.0])  # the default's wall s per sim-s, then the setting's
+                        {physics_settings.REFERENCE: {}, "240 Hz": {"dt": 1.0 / 240.0}})
+    costs = iter([2.0, 1.0])  # the reference's wall s per sim-s, then the setting's
     figures = physics_settings.evaluate_settings([generate_fillet(0)], [0.0], [100.0], lambda config: next(costs))
-    default, spread, coarse = figures
-    assert default.changes["line_phi"] == (0.0, 0.0) and default.speedup == 1.0
+    reference, spread, coarse = figures
+    assert reference.changes["line_phi"] == (0.0, 0.0) and reference.speedup == 1.0
     assert math.isnan(spread.wall_per_sim_s) and spread.name == physics_settings.SPREAD
     assert coarse.speedup == pytest.approx(2.0)
     assert coarse.changes["nmdm"][0] > 0.0 and coarse.runs == 1
@@ -38,7 +38,7 @@ def test_the_default_moves_nothing_and_a_coarser_step_is_cheaper_and_moves_the_s
 def test_a_coarser_chain_carries_the_papers_hinges_in_series_and_bends_like_its_chain():
     from woody_sim.line_world import PhysicsConfig, calibrated_config
 
-    assert PhysicsConfig().hinge_scale == 1.0 and PhysicsConfig(n_segments=20).hinge_scale == 0.5
+    assert PhysicsConfig(n_segments=40).hinge_scale == 1.0 and PhysicsConfig(n_segments=20).hinge_scale == 0.5
     mesh = generate_fillet(0)
     spec = RunSpec(mesh=mesh.name, k=100.0, speed_fpm=100.0, top=False)
     paper, coarse = (evaluate_run(spec, mesh, calibrated_config(n_segments=n))[1] for n in (40, 20))

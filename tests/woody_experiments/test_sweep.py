@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import math
 import subprocess
 import sys
@@ -154,6 +155,14 @@ def _check_resume(out, keys):
     assert other.returncode == 2 and "use another --out" in other.stderr
     turned = _woody(*ARGS, "--out", str(out), "--yaw-sd", "13")
     assert turned.returncode == 2 and "--yaw-sd 0.0; use another --out for --yaw-sd 13" in turned.stderr
+
+    # runs made with other physics (a folder from before it recorded its physics: the paper's chain) are not mixed in
+    meta = json.loads((out / "sweep_meta.json").read_text())
+    for invocation in meta["invocations"]:
+        del invocation["physics"]
+    (out / "sweep_meta.json").write_text(json.dumps(meta))
+    older = _woody(*ARGS, "--out", str(out))
+    assert older.returncode == 2 and "the physics 40 slices at 480 Hz, 20 iterations; use another --out" in older.stderr
 
 
 def test_each_mesh_lies_turned_the_same_way_at_every_k_and_speed_with_yaw_sd():

@@ -11,7 +11,14 @@ import pytest
 from woody_common.calibration import resolved_calibration
 from woody_sim.fillet_model import SegmentVisual, build_fillet_model, slab_volumes
 from woody_sim.line_geometry import LineGeometry
-from woody_sim.line_world import LineWorld, PhysicsConfig, calibrated_config, hinge_state, segment_inertias
+from woody_sim.line_world import (
+    PAPER_PHYSICS,
+    LineWorld,
+    PhysicsConfig,
+    calibrated_config,
+    hinge_state,
+    segment_inertias,
+)
 from woody_sim.meshes import BUILTIN_DIR, FilletMesh, load_mesh
 
 MASS = resolved_calibration().total_mass_kg
@@ -70,10 +77,11 @@ def test_segment_poses_and_hinge_angles_match_pybullet(fillet: FilletMesh) -> No
         while not world.is_dynamic(fid) or world.center_of_mass(fid)[0] < 0.02:
             world.step()
         poses = world.segment_poses()[fid]
-        assert poses.shape == (40, 7)
-        assert np.linalg.norm(poses[:, 3:], axis=1) == pytest.approx(np.ones(40))
+        n = PhysicsConfig().n_segments
+        assert poses.shape == (n, 7)
+        assert np.linalg.norm(poses[:, 3:], axis=1) == pytest.approx(np.ones(n))
         body = world._fillets[fid].body
-        joints = p.getJointStates(body, list(range(39)), physicsClientId=world._fillets[fid].physics.client)
+        joints = p.getJointStates(body, list(range(n - 1)), physicsClientId=world._fillets[fid].physics.client)
         assert world.hinge_angles(fid) == pytest.approx([j[0] for j in joints], abs=1e-9)
         assert world.hinge_angles(fid).sum() > 0.3  # the tip hangs down over the roller
         base = p.getBasePositionAndOrientation(body, physicsClientId=world._fillets[fid].physics.client)
@@ -242,9 +250,10 @@ def test_inertia_floor_raises_only_the_thin_slices_hinge_axis(fillet: FilletMesh
 def test_without_the_inertia_floor_heavy_stiff_chains_blow_up_on_the_roller():
     """The soak's failure (docs/physics.md, "Blow-ups"), kept reproducible so the soak test can fail.
 
-    Heavy, stiff chains pivot on the roller on their thin tail slices; without the floor they whip and a
-    chain is thrown faster than 12 m/s; with it the same batches fall as they should. Two batches of the
-    failing family, because which single passage blows up changes with round-off (docs/physics.md).
+    Heavy, stiff chains of the paper's thin slices pivot on the roller on their thin tail slices; without the
+    floor they whip and a chain is thrown faster than 12 m/s; with it the same batches fall as they should, and
+    so do the default chain's. Two batches of the failing family, because which single passage blows up changes
+    with round-off (docs/physics.md).
     """
     from woody_sim.meshes import load_mesh_set
     from woody_sim.soak import SoakCondition, run_batch
@@ -252,11 +261,12 @@ def test_without_the_inertia_floor_heavy_stiff_chains_blow_up_on_the_roller():
     meshes, _ = load_mesh_set("builtin")
     conditions = [SoakCondition(mesh=1, k=400.0, mass=300.0, speed_fpm=100.0, lanes=6, staggered=True),
                   SoakCondition(mesh=3, k=400.0, mass=100.0, speed_fpm=100.0, lanes=6, staggered=False)]
-    bare = [run_batch(c, meshes[c.mesh], calibrated_config(inertia_floor=0.0)) for c in conditions]
+    bare = [run_batch(c, meshes[c.mesh], calibrated_config(inertia_floor=0.0, **PAPER_PHYSICS)) for c in conditions]
     assert sum(blown for _, blown, _, _ in bare) >= 1
     for condition in conditions:
-        passages, blown, worst, _ = run_batch(condition, meshes[condition.mesh], calibrated_config())
-        assert (passages, blown) == (6, 0) and worst < 6.0
+        for config in (calibrated_config(**PAPER_PHYSICS), calibrated_config()):
+            passages, blown, worst, _ = run_batch(condition, meshes[condition.mesh], config)
+            assert (passages, blown) == (6, 0) and worst < 6.0
 
 
 def run_digest(config: PhysicsConfig | None = None) -> str:
@@ -314,8 +324,13 @@ def test_the_friction_cone_is_left_out_because_the_frictionless_belt_makes_it_ch
     assert run_digest(rough) != rough_without_cone  # the setting does act where there is friction
 
 
+STEPS_PAST_EDGE = round(0.625 / PhysicsConfig().dt)
+"""Steps of the default physics over which a chain spawned at -0.15 m tips over the roller."""
+
+
 def chain_poses_after(history: int) -> np.ndarray:
-    """Poses of one k = 100 chain over 300 steps, in a world that first built and removed ``history`` other chains."""
+    """Poses of one k = 100 chain over STEPS_PAST_EDGE steps, in a world that first built and removed ``history``
+    other chains."""
     from woody_sim.meshes import load_mesh_set
 
     meshes, _ = load_mesh_set("builtin")
@@ -328,7 +343,7 @@ def chain_poses_after(history: int) -> np.ndarray:
             world.remove(earlier)
         fid = world.spawn(meshes[2], 100.0, 1, MASS, SPEED)
         poses = []
-        for _ in range(300):
+        for _ in range(STEPS_PAST_EDGE):
             world.step()
             if fid in world.fillets:
                 poses.append(world.segment_poses()[fid])
@@ -346,9 +361,9 @@ def test_a_chain_moves_the_same_in_a_world_that_has_run_other_chains():
     metres a wrong mass matrix gives.
     """
     fresh, aged = chain_poses_after(0), chain_poses_after(6)
-    assert len(aged) == len(fresh) == 300
-    step_error = np.abs(fresh - aged).reshape(300, -1).max(axis=1)
-    assert step_error[:140].max() < 1e-9
+    assert len(aged) == len(fresh) == STEPS_PAST_EDGE
+    step_error = np.abs(fresh - aged).reshape(STEPS_PAST_EDGE, -1).max(axis=1)
+    assert step_error[:STEPS_PAST_EDGE * 140 // 300].max() < 1e-9
     assert step_error.max() < 0.01
 
 
@@ -385,8 +400,11 @@ def test_chains_are_built_in_fresh_pybullet_worlds_and_an_emptied_world_is_close
 
     meshes, _ = load_mesh_set("builtin")
     geometry = LineGeometry(lanes=3, spawn_x=-0.15)
-    spawns = [(0, meshes[0], 0.0, 0), (40, meshes[1], 100.0, 1), (80, meshes[2], 0.0, 2), (300, meshes[0], 100.0, 0)]
-    sample_step = 320
+    step = PhysicsConfig().dt
+    at = ((0.0, meshes[0], 0.0, 0), (0.083, meshes[1], 100.0, 1), (0.167, meshes[2], 0.0, 2),
+          (0.625, meshes[0], 100.0, 0))
+    spawns = [(round(t / step), mesh, k, lane) for t, mesh, k, lane in at]
+    sample_step = round(0.667 / step)
 
     def poses_of(chosen: list, chains_per_world: int) -> tuple[dict[int, np.ndarray], int]:
         monkeypatch.setattr(line_world, "CHAINS_PER_PHYSICS", chains_per_world)

@@ -40,7 +40,7 @@ def test_each_fillet_moves_as_alone_in_a_world_whichever_process_simulates_it(me
     """The first spawn goes to the worker, the second stays here (the worker has more fillets by then); the
     worker hears of its spawn late, and both tip over the roller exactly as a lone chain would (a shared world
     would differ in round-off by millimetres)."""
-    steps = 330
+    steps = round(0.69 / calibrated_config().dt)
     with SplitLineWorld(GEOMETRY, calibrated_config()) as world:
         there = world.spawn(meshes[0], 0.0, 0, MASS, SPEED)
         for _ in range(5):
@@ -146,21 +146,24 @@ def test_a_released_mesh_key_is_never_given_to_another_mesh(meshes):
 @pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="two physics workers need two cores")
 def test_each_spawn_goes_where_the_fewest_fillets_live_and_moves_as_alone(meshes):
     """Six lanes spawning together over this process and two workers: two fillets each, workers first; a removed
-    fillet frees its world's place, and every chain still moves as a lone one."""
+    fillet frees its world's place, and every chain moves as a lone one: to round-off, since two chains of one
+    process share a pybullet world and its contact order (test_physics, a chain in a world that ran others)."""
     geometry = LineGeometry(lanes=6, spawn_x=-0.3)
     with SplitLineWorld(geometry, calibrated_config(), workers=2) as world:
         ids = [world.spawn(meshes[lane % 3], 100.0, lane, MASS, SPEED) for lane in range(6)]
         assert [len(w.models) for w in world._workers] == [2, 2] and len(world._local.fillets) == 2
         assert set(world._workers[0].models) == {ids[0], ids[3]} and set(world._local.fillets) == {ids[2], ids[5]}
-        world.plan(200 * world.config.dt)
-        while world.steps < 200:
+        steps = round(0.42 / world.config.dt)  # tipping over the roller
+        world.plan(steps * world.config.dt)
+        while world.steps < steps:
             world.step()
         poses = world.segment_poses()
     with LineWorld(geometry, calibrated_config()) as lone:
         fid = lone.spawn(meshes[1], 100.0, 4, MASS, SPEED)
-        while lone.steps < 200:
+        while lone.steps < steps:
             lone.step()
-        assert np.array_equal(poses[ids[4]], lone.segment_poses()[fid])
+        assert lone.is_dynamic(fid)
+        assert np.abs(poses[ids[4]] - lone.segment_poses()[fid]).max() < 1e-4
 
 
 def test_more_workers_than_cores_are_refused():

@@ -1,15 +1,15 @@
 """What each physics setting costs and what it changes in the scores: the settings table of docs/physics.md.
 
-A cheaper physics that leaves every score where the default puts it is the same science, faster; one that moves
-the scores is a trade-off. For each setting (:data:`SETTINGS`, PhysicsConfig overrides) this measures
+A cheaper physics that leaves every score where the paper's chain puts it is the same science, faster; one that
+moves the scores is a trade-off. For each setting (:data:`SETTINGS`, PhysicsConfig overrides) this measures
 
 * its cost: wall seconds per simulated second of a line of fillets (woody_tools' physics benchmark, the same
   LineWorld line_sim steps; per second, not per step, so that steps of another length compare), beside the
-  default's, timed in the same run;
+  paper chain's, timed in the same run;
 * what it changes: the same runs as `woody sweep` evaluates (:func:`~woody_experiments.experiment.evaluate_run`,
-  tidy line, every lane), each fillet's Φ, ``line_phi``, NMDM and BE against the default's, as |ln(setting /
-  default)|, and how many runs the calibrated cut still grades right;
-* the yardstick: the default against itself with the fillet spawned a third of a camera frame later
+  tidy line, every lane), each fillet's Φ, ``line_phi``, NMDM and BE against the paper chain's, as
+  |ln(setting / paper)|, and how many runs the calibrated cut still grades right;
+* the yardstick: the paper's chain against itself with the fillet spawned a third of a camera frame later
   (``spawn_offset_m``; not a whole number of physics steps either), how much a score moves from one fillet of
   a line to the next without any change to the physics. A setting whose changes stay inside that spread
   changes nothing the project measures.
@@ -27,29 +27,30 @@ from woody_common.calibration import resolved_calibration
 from woody_common.line import fpm_to_mps
 from woody_experiments.experiment import TOP_RATE_HZ, RunSpec, evaluate_run
 from woody_experiments.line_grade import conditions_of
-from woody_sim.line_world import PhysicsConfig, calibrated_config
+from woody_sim.line_world import PAPER_PHYSICS, PhysicsConfig, calibrated_config
 from woody_sim.meshes import FilletMesh
 from woody_vision.grader_core import calibrated_rules
 from woody_vision.grading import GradingRules
 
 SETTINGS: dict[str, dict] = {
-    "default (480 Hz, 20 iterations)": {},
-    "10 solver iterations": {"solver_iterations": 10},
-    "5 solver iterations": {"solver_iterations": 5},
-    "360 Hz": {"dt": 1.0 / 360.0},
-    "240 Hz": {"dt": 1.0 / 240.0},
-    "360 Hz, 10 iterations": {"dt": 1.0 / 360.0, "solver_iterations": 10},
-    "240 Hz, 10 iterations": {"dt": 1.0 / 240.0, "solver_iterations": 10},
-    "30 slices": {"n_segments": 30},
-    "20 slices": {"n_segments": 20},
+    "40 slices, 480 Hz, 20 iterations": PAPER_PHYSICS,
+    "10 solver iterations": {**PAPER_PHYSICS, "solver_iterations": 10},
+    "5 solver iterations": {**PAPER_PHYSICS, "solver_iterations": 5},
+    "360 Hz": {**PAPER_PHYSICS, "dt": 1.0 / 360.0},
+    "240 Hz": {**PAPER_PHYSICS, "dt": 1.0 / 240.0},
+    "360 Hz, 10 iterations": {**PAPER_PHYSICS, "dt": 1.0 / 360.0, "solver_iterations": 10},
+    "240 Hz, 10 iterations": {**PAPER_PHYSICS, "dt": 1.0 / 240.0, "solver_iterations": 10},
+    "30 slices": {**PAPER_PHYSICS, "n_segments": 30},
+    "20 slices": {**PAPER_PHYSICS, "n_segments": 20},
     "30 slices, 360 Hz": {"n_segments": 30, "dt": 1.0 / 360.0},
-    "24 slices, 360 Hz": {"n_segments": 24, "dt": 1.0 / 360.0},
+    "24 slices, 360 Hz (the default)": {"n_segments": 24, "dt": 1.0 / 360.0},
     "20 slices, 360 Hz": {"n_segments": 20, "dt": 1.0 / 360.0},
 }
-"""Name -> PhysicsConfig overrides; the first is the default every other is compared with."""
-DEFAULT = next(iter(SETTINGS))
-SPREAD = "the default, a third of a frame later"
-"""The yardstick row: the default's own run-to-run spread."""
+"""Name -> PhysicsConfig overrides; the first is the paper's chain (20 solver iterations), which every other is
+compared with."""
+REFERENCE = next(iter(SETTINGS))
+SPREAD = "the paper's chain, a third of a frame later"
+"""The yardstick row: the paper chain's own run-to-run spread."""
 SPREAD_FRAMES = 1.0 / 3.0
 """How much later (camera frames) the yardstick row spawns each fillet."""
 SCORES = ("phi", "line_phi", "nmdm", "be")
@@ -63,9 +64,9 @@ class SettingFigures:
     wall_per_sim_s: float
     """Wall seconds per simulated second of the timed line (NaN for the yardstick row)."""
     speedup: float
-    """The default's wall seconds per simulated second over this setting's."""
+    """The paper chain's wall seconds per simulated second over this setting's."""
     changes: dict[str, tuple[float, float]]
-    """Score -> (median, max) |ln(setting / default)| over the fillets."""
+    """Score -> (median, max) |ln(setting / paper)| over the fillets."""
     right: int
     """Runs (median over their lanes) the calibrated reject cut grades right, normal k = 0 vs severe k > 0."""
     runs: int
@@ -88,29 +89,30 @@ def evaluate_settings(meshes: list[FilletMesh], ks: list[float], speeds: list[fl
             out[spec] = evaluate_run(replace(spec, spawn_offset_m=shift), by_name[spec.mesh], config)
         return out
 
-    baseline = rows_of({})
+    reference = SETTINGS[REFERENCE]
+    baseline = rows_of(reference)
     rules = calibrated_rules(calibration)
-    default_cost = cost(calibrated_config(calibration))
-    figures = [_figures(DEFAULT, default_cost, default_cost, baseline, baseline, rules),
-               _figures(SPREAD, math.nan, default_cost, rows_of({}, SPREAD_FRAMES), baseline, rules)]
+    paper_cost = cost(calibrated_config(calibration, **reference))
+    figures = [_figures(REFERENCE, paper_cost, paper_cost, baseline, baseline, rules),
+               _figures(SPREAD, math.nan, paper_cost, rows_of(reference, SPREAD_FRAMES), baseline, rules)]
     for name, overrides in list(SETTINGS.items())[1:]:
         if progress is not None:
             progress(name)
         spent = cost(calibrated_config(calibration, **overrides))
-        figures.append(_figures(name, spent, default_cost, rows_of(overrides), baseline, rules))
+        figures.append(_figures(name, spent, paper_cost, rows_of(overrides), baseline, rules))
     return figures
 
 
-def _figures(name: str, spent: float, default_cost: float, rows: dict, baseline: dict,
+def _figures(name: str, spent: float, paper_cost: float, rows: dict, baseline: dict,
              rules: GradingRules) -> SettingFigures:
     changes = {score: _changes(rows, baseline, score) for score in SCORES}
     right = sum(_graded_right(lanes, rules) for lanes in rows.values())
-    speedup = default_cost / spent if math.isfinite(spent) else math.nan
+    speedup = paper_cost / spent if math.isfinite(spent) else math.nan
     return SettingFigures(name, spent, speedup, changes, right, len(rows))
 
 
 def _changes(rows: dict, baseline: dict, score: str) -> tuple[float, float]:
-    """(median, max) |ln(new / default)| of one score over every lane row both runs measured."""
+    """(median, max) |ln(new / paper)| of one score over every lane row both runs measured."""
     moved = [abs(math.log(new[score] / old[score])) for spec in rows for new, old in zip(rows[spec], baseline[spec])
              if new[score] > 0 and old[score] > 0]
     return (float(np.median(moved)), float(np.max(moved))) if moved else (math.nan, math.nan)

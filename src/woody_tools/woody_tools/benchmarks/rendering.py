@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 
+from woody_sim.fillet_model import DEFAULT_SEGMENTS
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.rendering import LineRenderer, draped_poses, fillet_color, flat_poses, load_reference_visuals
 from woody_tools.benchmarks.tiny_renderer import TinyRendererScene
@@ -22,7 +23,7 @@ def _bench_poses(g: LineGeometry, offsets: list[tuple[np.ndarray, int]], phase: 
 
 
 def benchmark_rendering(
-    n_fillets: int = 3, frames: int = 100, geometry: LineGeometry | None = None, n_segments: int = 40,
+    n_fillets: int = 3, frames: int = 100, geometry: LineGeometry | None = None, n_segments: int = DEFAULT_SEGMENTS,
     baseline_every: int = 6,
 ) -> dict:
     """Time LineRenderer on the reference meshes (the watched lane always has a fillet in the side view)

@@ -77,7 +77,7 @@ def _crowding(args: argparse.Namespace) -> list[str]:
 
 
 def _physics_settings(args: argparse.Namespace, reference: float) -> int:
-    """The settings table: each setting timed beside the default and the reference workload, and its scores."""
+    """The settings table: each setting timed beside the paper's chain and the reference workload, and its scores."""
     from woody_experiments.mesh_sets import load_meshes
     from woody_experiments.physics_settings import SETTINGS, evaluate_settings, markdown_table
     from woody_tools.benchmarks.physics import benchmark_physics

@@ -34,6 +34,7 @@ from woody_experiments.mesh_sets import DEFAULT_MESHES, load_meshes
 from woody_experiments.run_report import uncalibrated_speed_note
 from woody_sim.camera_description import is_camera_file
 from woody_sim.line_geometry import TOP_CAMERA_PRESETS, top_camera_preset
+from woody_sim.line_world import PAPER_PHYSICS, PhysicsConfig
 from woody_sim.sensor_model import PRESETS
 from woody_tools import arguments
 from woody_vision.shape_score import W1, W2
@@ -165,8 +166,10 @@ def _report_traces(out: Path, threshold: float) -> None:
           f"{out / traces.TRACE_DIR}", file=sys.stderr)
 
 
-FOLDER_SETTINGS = {"top_camera": "default", "yaw_sd": 0.0, "lane_pitch": LANE_PITCH_M, "speed_change": None}
-"""Settings all the runs in one --out folder share (runs.csv does not repeat them per row), with their defaults."""
+FOLDER_SETTINGS = {"top_camera": "default", "yaw_sd": 0.0, "lane_pitch": LANE_PITCH_M, "speed_change": None,
+                   "physics": PhysicsConfig(**PAPER_PHYSICS).resolution}
+"""Settings all the runs in one --out folder share (runs.csv does not repeat them per row), with the value a folder
+that does not record one was made with."""
 
 
 def _folder_mismatch(meta_path: Path, args: argparse.Namespace) -> str | None:
@@ -177,7 +180,8 @@ def _folder_mismatch(meta_path: Path, args: argparse.Namespace) -> str | None:
     invocations = json.loads(meta_path.read_text()).get("invocations", [])
     for name, default in FOLDER_SETTINGS.items():
         before = {i.get(name, default) for i in invocations}
-        flag, now = "--" + name.replace("_", "-"), getattr(args, name)
+        flag = "the physics" if name == "physics" else "--" + name.replace("_", "-")
+        now = PhysicsConfig().resolution if name == "physics" else getattr(args, name)
         if len(before) == 1 and now not in before:
             return f"{flag} {before.pop()}; use another --out for {flag} {now}"
     return None
@@ -218,7 +222,7 @@ def _update_meta(path: Path, stats: cluster.Throughput, args: argparse.Namespace
             "cores": os.cpu_count(), "scheduler": args.scheduler or "local", **stats.as_meta(),
             "meshes": args.meshes, "n_meshes": n_meshes, "mass": mass, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
             "top_camera": args.top_camera, "yaw_sd": args.yaw_sd, "lane_pitch": args.lane_pitch,
-            "speed_change": args.speed_change,
+            "speed_change": args.speed_change, "physics": PhysicsConfig().resolution,
         })
     meta["evaluations"] = sum(i["evaluations"] for i in meta["invocations"])
     meta["wall_s"] = sum(i["wall_s"] for i in meta["invocations"])
