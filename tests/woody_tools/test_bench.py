@@ -48,7 +48,7 @@ def test_the_line_to_benchmark_is_checked_like_woody_runs(capsys):
         assert "woody bench: error: argument" in capsys.readouterr().err
 
 
-def test_the_graph_runs_the_crowded_line_it_is_given(monkeypatch, capsys):
+def test_the_graph_runs_the_crowded_line_and_the_physics_workers_it_is_given(monkeypatch, capsys):
     import argparse
 
     from woody_tools.commands import bench as command
@@ -58,7 +58,8 @@ def test_the_graph_runs_the_crowded_line_it_is_given(monkeypatch, capsys):
     parser = argparse.ArgumentParser(prog="woody bench")
     command.add_arguments(parser)
     args = parser.parse_args(["graph", "--lanes", "6", "--speed-fpm", "130", "--line", "messy", "--lane-pitch",
-                              "0.12", "--spacing", "0.26"])
+                              "0.12", "--spacing", "0.26", "--physics-workers", "0"])
     assert command.run(args) == 0
-    assert given["crowding"] == ["--line", "messy", "--lane-pitch", "0.12", "--spacing", "0.26"]
-    assert command._crowding(parser.parse_args(["graph"])) == []
+    assert given["run_options"] == ["--line", "messy", "--lane-pitch", "0.12", "--spacing", "0.26",
+                                    "--physics-workers", "0"]
+    assert command._graph_options(parser.parse_args(["graph"])) == []

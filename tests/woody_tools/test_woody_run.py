@@ -311,6 +311,9 @@ def test_a_run_on_an_exported_domain_with_other_nodes_refuses(tmp_path):
     (["--top-camera", "/nonexistent/mine.yaml"], "--top-camera: camera file /nonexistent/mine.yaml: cannot read it"),
     (["--vision-setup", "/nonexistent/params.yaml"], "--vision-setup /nonexistent/params.yaml: not a woody camera "
                                                      "setup parameters file"),
+    (["--physics-workers", "-1"], "--physics-workers must be 0.."),
+    (["--physics-recycle", "0"], "--physics-recycle must be >= 1 fillets, got 0"),
+    (["--physics-workers", "0", "--physics-recycle", "300"], "--physics-recycle needs --physics-workers >= 1"),
 ])
 def test_bad_line_options_are_refused_before_any_node_starts(tmp_path, args, message):
     result = woody_run("--fillets", "1", "--out", str(tmp_path / "run"), *args, timeout=60)
@@ -354,6 +357,20 @@ def test_defaults_keep_the_tidy_line_and_a_paper_threshold_goes_to_the_paper_rul
     assert "line_threshold" not in params["grader"]
     for speed in ("90", "140"):  # any speed of a real line
         assert _parameters("--speed-fpm", speed)["line_sim"]["line_speed_fpm"] == float(speed)
+
+
+def test_the_physics_options_reach_line_sim_and_its_defaults_stay_its_own():
+    sim = _parameters("--physics-workers", "1", "--physics-recycle", "300", "--paper-physics")["line_sim"]
+    assert (sim["physics_workers"], sim["physics_recycle_fillets"]) == (1, 300)
+    assert (sim["segments"], sim["physics_rate_hz"]) == (40, 480.0)
+    from woody_tools.cli import build_parser
+    from woody_tools.commands.run import checked
+    from woody_tools.line_run import run_settings
+
+    args = checked(build_parser("run").parse_args(["run", "--physics-workers", "2", "--paper-physics"]))
+    assert run_settings(args, 12)["physics"] == "physics_workers 2, segments 40, physics_rate_hz 480"
+    assert not {"physics_workers", "physics_recycle_fillets", "segments", "physics_rate_hz"} & set(
+        _parameters()["line_sim"])
 
 
 SETUP = {"/**/segmenter": {"ros__parameters": {"lanes": 3, "camera_height_m": 0.701, "lane_pitch_m": 0.159,

@@ -21,6 +21,10 @@ fitted and scored on them, and a line mixes them by default."""
 CLASS_K = (NORMAL_K, SEVERE_K)
 MAX_LANES = 6
 """Most lanes any entry point accepts (lanes 1..MAX_LANES; a side lane -1 = centre, or 0..MAX_LANES - 1)."""
+PAPER_SEGMENTS = 40
+"""Slices of the paper's chain; its k and c are per hinge of it (woody_sim.line_world.PhysicsConfig.hinge_scale)."""
+PAPER_PHYSICS_RATE_HZ = 480.0
+"""Physics steps per second of sim time the paper's chain was validated at (docs/physics.md)."""
 MAX_SIDE_RATE_HZ = 400.0
 """Fastest side camera line_sim and woody run accept (0 turns it off)."""
 MAX_SPAWN_DURATION_S = 1e6

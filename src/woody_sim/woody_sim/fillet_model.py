@@ -23,8 +23,6 @@ import numpy as np
 
 from woody_sim.meshes import FilletMesh, HeightMap
 
-PAPER_SEGMENTS = 40
-"""Slices of the paper's chain; its k and c are per hinge of it (PhysicsConfig.hinge_scale)."""
 DEFAULT_SEGMENTS = 24
 """Slices of a chain unless asked otherwise: with the hinges scaled (PhysicsConfig.hinge_scale) the paper's chain
 at a coarser resolution, its scores inside their run-to-run spread and its step 2.7x cheaper with the 360 Hz step

@@ -56,11 +56,11 @@ import numpy as np
 import pybullet as p
 
 from woody_common.calibration import Calibration, resolved_calibration
-from woody_common.line import MAX_SPEED_MPS
+from woody_common.line import MAX_SPEED_MPS, PAPER_PHYSICS_RATE_HZ, PAPER_SEGMENTS
 from woody_sim import fillet_model, meshes
 from woody_sim.belt_drive import belt_drive
 from woody_sim.disk_cache import cached, digest
-from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, PAPER_SEGMENTS, FilletModel, build_fillet_model
+from woody_sim.fillet_model import DEFAULT_SEGMENTS, NOMINAL_MASS, FilletModel, build_fillet_model
 from woody_sim.hinge_law import chain_mass_matrix, hinge_state, implicit_hinge_torque
 from woody_sim.line_geometry import LineGeometry
 from woody_sim.meshes import DERIVED_MARK, FilletMesh
@@ -139,7 +139,7 @@ class PhysicsConfig:
             raise ValueError(f"activation_margin must be >= 0 or None, got {self.activation_margin}")
 
 
-PAPER_PHYSICS = {"n_segments": PAPER_SEGMENTS, "dt": 1.0 / 480.0}
+PAPER_PHYSICS = {"n_segments": PAPER_SEGMENTS, "dt": 1.0 / PAPER_PHYSICS_RATE_HZ}
 """PhysicsConfig overrides for the paper's own chain: 40 slices stepped at 480 Hz (docs/physics.md)."""
 
 

@@ -26,7 +26,7 @@ from woody_bag.summary import bag_summary, losses_text, recorded_losses, recordi
 from woody_common import topics
 from woody_common.dds_shm import remove_stale
 from woody_common.diagnostics import GRADED_UP_TO
-from woody_common.line import fpm_to_mps, spacing_at_rate, watched_lane
+from woody_common.line import PAPER_PHYSICS_RATE_HZ, PAPER_SEGMENTS, fpm_to_mps, spacing_at_rate, watched_lane
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.fillet_pictures import write_fillet_pictures
 from woody_experiments.messages import (
@@ -266,6 +266,7 @@ def run_settings(args: argparse.Namespace, fillets: int | None) -> dict[str, obj
                              if args.speed_change_fpm else "none"),
             UNSCORED_DIVERTED: True, OUTSIDE_GRADED: args.grade_outside_calibration,
             "gate distance (m)": args.gate_distance, "namespace": args.namespace or "/",
+            "physics": _physics_setting(args),
             CALIBRATED_SPEEDS: "..".join(f"{v:g}" for v in args.calibrated_speeds) if args.calibrated_speeds
             else "not recorded in the calibration"}
 
@@ -388,6 +389,23 @@ def _sim_params(args: argparse.Namespace, fillets: int | None) -> dict[str, obje
         params["fillets_per_minute"] = float(args.fillets_per_minute)
     if args.speed_change_fpm:
         params.update(speed_change_fpm=float(args.speed_change_fpm), speed_change_at_s=float(args.speed_change_at))
+    return {**params, **_physics_params(args)}
+
+
+def _physics_setting(args: argparse.Namespace) -> str:
+    """The run's physics as report.md names it: the line_sim parameters its options set, else line_sim's own."""
+    return ", ".join(f"{name} {value:g}" for name, value in _physics_params(args).items()) or "line_sim default"
+
+
+def _physics_params(args: argparse.Namespace) -> dict[str, object]:
+    """line_sim's physics parameters the options gave: its workers, their recycling, the paper's chain."""
+    params: dict[str, object] = {}
+    if args.physics_workers is not None:
+        params["physics_workers"] = args.physics_workers
+    if args.physics_recycle is not None:
+        params["physics_recycle_fillets"] = args.physics_recycle
+    if args.paper_physics:
+        params.update(segments=PAPER_SEGMENTS, physics_rate_hz=PAPER_PHYSICS_RATE_HZ)
     return params
 
 

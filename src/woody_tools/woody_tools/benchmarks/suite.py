@@ -93,14 +93,14 @@ def bench_sim(seconds: float, lanes: int = LANES, speed_fpm: float = REFERENCE_S
 
 
 def bench_graph(lanes: int = LANES, speed_fpm: float = REFERENCE_SPEED_FPM, spawn_s: float = 10.0,
-                live: bool = False, crowding: Sequence[str] = ()) -> dict:
+                live: bool = False, run_options: Sequence[str] = ()) -> dict:
     """`woody run` (the whole graph with the recorder) at ``lanes`` and ``speed_fpm``, spawning for ``spawn_s`` sim
     seconds so the line runs full, as a subprocess: its speed, its node start-up, whether every fillet got its
-    verdict and whether the recorder lost anything. ``crowding``: more `woody run` options of the line (its
-    preset, lane pitch and spacing). With ``live``, the same line once more with ``--live`` and a Foxglove client
-    watching the colour image, the annotations and the verdicts: the view's cost to the line."""
-    line = ["--lanes", str(lanes), "--speed-fpm", f"{speed_fpm:g}", "--duration", f"{spawn_s:g}", *crowding]
-    figures = {"lanes": lanes, "speed_fpm": speed_fpm, "line": " ".join(crowding) or "tidy",
+    verdict and whether the recorder lost anything. ``run_options``: more `woody run` options (the line's preset,
+    lane pitch and spacing, its physics workers). With ``live``, the same line once more with ``--live`` and a
+    Foxglove client watching the colour image, the annotations and the verdicts: the view's cost to the line."""
+    line = ["--lanes", str(lanes), "--speed-fpm", f"{speed_fpm:g}", "--duration", f"{spawn_s:g}", *run_options]
+    figures = {"lanes": lanes, "speed_fpm": speed_fpm, "line": " ".join(run_options) or "tidy",
                **_graph_run(line, "woody_run")}
     if live:
         figures.update(_graph_run(line, "woody_run_live"))

@@ -47,6 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--spacing", type=float, default=None, metavar="M",
                         help="graph: belt distance between consecutive fillets of a lane (woody run --spacing); "
                              "with --lane-pitch 0.12 and --spacing 0.26 a crowded line")
+    parser.add_argument("--physics-workers", type=int, default=None, metavar="N",
+                        help="graph: physics worker processes beside line_sim (woody run --physics-workers; "
+                             "default line_sim's, 1)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     line = {"lanes": int(args.lanes), "speed_fpm": args.speed_fpm}
     benches = {"sim": lambda: bench_sim(args.seconds, **line),
                "vision": lambda: bench_vision(args.frames, args.seconds),
-               "graph": lambda: bench_graph(**line, live=args.live, crowding=_crowding(args)),
+               "graph": lambda: bench_graph(**line, live=args.live, run_options=_graph_options(args)),
                "sweep": bench_sweep}
     if args.target == "physics":
         return _physics_settings(args, reference)
@@ -70,9 +73,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _crowding(args: argparse.Namespace) -> list[str]:
+def _graph_options(args: argparse.Namespace) -> list[str]:
     """The `woody run` options of `graph`'s line beyond lanes and speed: those given on the command line."""
-    given = (("--line", args.line), ("--lane-pitch", args.lane_pitch), ("--spacing", args.spacing))
+    given = (("--line", args.line), ("--lane-pitch", args.lane_pitch), ("--spacing", args.spacing),
+             ("--physics-workers", args.physics_workers))
     return [text for option, value in given if value is not None for text in (option, f"{value}")]
 
 

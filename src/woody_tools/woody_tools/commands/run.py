@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import sys
 from pathlib import Path
@@ -101,6 +102,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run on an exported ROS_DOMAIN_ID even when another woody run holds it (they mix)")
     _add_line_arguments(parser)
     _add_grading_arguments(parser)
+    _add_physics_arguments(parser)
+
+
+def _add_physics_arguments(parser: argparse.ArgumentParser) -> None:
+    physics = parser.add_argument_group("physics (line_sim's parameters of the same names)")
+    physics.add_argument("--physics-workers", type=int, default=None, metavar="N",
+                         help="worker processes sharing the physics with line_sim (0: all in line_sim; at most the "
+                              "core count; default line_sim's, 1)")
+    physics.add_argument("--physics-recycle", type=int, default=None, metavar="N",
+                         help="replace each physics worker with a fresh process after N fillets, so that a line "
+                              "running for hours keeps its memory flat (needs --physics-workers >= 1)")
+    physics.add_argument("--paper-physics", action="store_true",
+                         help="simulate the paper's chain (40 slices at 480 Hz) instead of the default 24 slices at "
+                              "360 Hz (docs/physics.md)")
 
 
 def _add_line_arguments(parser: argparse.ArgumentParser) -> None:
@@ -182,10 +197,22 @@ def _validate(args: argparse.Namespace) -> None:
         raise RunRefused(f"--live PORT must be 0..65535 (0: any free port), got {args.live}")
     _validate_line(args)
     _validate_crowding(args)
+    _validate_physics(args)
     _validate_grading(args)
     _validate_calibration(args)
     _validate_top_camera(args)
     _validate_vision_setup(args)
+
+
+def _validate_physics(args: argparse.Namespace) -> None:
+    cores = os.cpu_count() or 1
+    if args.physics_workers is not None and not 0 <= args.physics_workers <= cores:
+        raise RunRefused(f"--physics-workers must be 0..{cores} (this machine's cores), got {args.physics_workers}")
+    if args.physics_recycle is not None:
+        if args.physics_recycle < 1:
+            raise RunRefused(f"--physics-recycle must be >= 1 fillets, got {args.physics_recycle}")
+        if args.physics_workers == 0:
+            raise RunRefused("--physics-recycle needs --physics-workers >= 1: only a worker process can be replaced")
 
 
 VISION_SETUP_NODES = ("segmenter", "grader", "line_sim")
