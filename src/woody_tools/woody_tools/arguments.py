@@ -67,6 +67,13 @@ def add_yaw_sd(parser: argparse.ArgumentParser, scope: str) -> None:
                              f"the same at every k and speed (default 0: straight; {scope})")
 
 
+def add_physics_workers(parser: argparse.ArgumentParser | argparse._ArgumentGroup, scope: str) -> None:
+    """``--physics-workers N`` (line_sim's ``physics_workers``); ``scope`` starts the help with what it applies to."""
+    parser.add_argument("--physics-workers", type=int, default=None, metavar="N",
+                        help=f"{scope}worker processes sharing the physics with line_sim (0: all in line_sim; at most "
+                             "the core count; default line_sim's, 1)")
+
+
 def speed_change(text: str) -> tuple[float, float]:
     """``FPM@SECONDS`` (a belt speed change during a run) as (FPM, sim s); a ValueError says what is expected."""
     low, high = SPEED_RANGE_FPM

@@ -47,9 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--spacing", type=float, default=None, metavar="M",
                         help="graph: belt distance between consecutive fillets of a lane (woody run --spacing); "
                              "with --lane-pitch 0.12 and --spacing 0.26 a crowded line")
-    parser.add_argument("--physics-workers", type=int, default=None, metavar="N",
-                        help="graph: physics worker processes beside line_sim (woody run --physics-workers; "
-                             "default line_sim's, 1)")
+    arguments.add_physics_workers(parser, "graph: ")
 
 
 def run(args: argparse.Namespace) -> int:

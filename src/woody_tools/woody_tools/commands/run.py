@@ -107,9 +107,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _add_physics_arguments(parser: argparse.ArgumentParser) -> None:
     physics = parser.add_argument_group("physics (line_sim's parameters of the same names)")
-    physics.add_argument("--physics-workers", type=int, default=None, metavar="N",
-                         help="worker processes sharing the physics with line_sim (0: all in line_sim; at most the "
-                              "core count; default line_sim's, 1)")
+    arguments.add_physics_workers(physics, "")
     physics.add_argument("--physics-recycle", type=int, default=None, metavar="N",
                          help="replace each physics worker with a fresh process after N fillets, so that a line "
                               "running for hours keeps its memory flat (needs --physics-workers >= 1)")
