@@ -27,7 +27,7 @@ def test_a_small_rate_per_reference_is_printed_to_four_significant_digits(monkey
     monkeypatch.setattr(command, "reference_ms", lambda: 1.836)
     monkeypatch.setattr(command, "bench_graph", lambda **line: {"woody_run_rtf": 0.73, "verdicts": 70})
     assert command.run(argparse.Namespace(target="graph", json_path=None, lanes=3, speed_fpm=100.0, live=False,
-                                          line=None, lane_pitch=None, spacing=None)) == 0
+                                          line=None, lane_pitch=None, spacing=None, physics_workers=None)) == 0
     printed = dict(line.split() for line in capsys.readouterr().out.splitlines())
     assert printed == {"reference_ms": "1.836", "woody_run_rtf": "0.73", "woody_run_rtf_ref": "0.00134",
                        "verdicts": "70"}
