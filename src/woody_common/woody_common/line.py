@@ -6,6 +6,8 @@ line reads them without pybullet. tests/woody_common/test_line.py checks that th
 camera's pixel values are the ones the simulator's geometry projects.
 """
 
+import os
+
 FPM_TO_MPS = 0.3048 / 60.0
 """Feet per minute to metres per second (100 FPM = 0.508 m/s); convert with :func:`fpm_to_mps` and
 :func:`mps_to_fpm`."""
@@ -25,6 +27,9 @@ PAPER_SEGMENTS = 40
 """Slices of the paper's chain; its k and c are per hinge of it (woody_sim.line_world.PhysicsConfig.hinge_scale)."""
 PAPER_PHYSICS_RATE_HZ = 480.0
 """Physics steps per second of sim time the paper's chain was validated at (docs/physics.md)."""
+MAX_PHYSICS_WORKERS = 64
+"""The most physics worker processes a line starts (woody_sim.split_world); :func:`physics_worker_limit` also caps
+them at the core count."""
 MAX_SIDE_RATE_HZ = 400.0
 """Fastest side camera line_sim and woody run accept (0 turns it off)."""
 MAX_SPAWN_DURATION_S = 1e6
@@ -133,3 +138,9 @@ MAX_SPEED_MPS = fpm_to_mps(SPEED_RANGE_FPM[1])
 MAX_FILLET_WIDTH_M = 0.13
 """The widest a single fillet lies across the flow when straight (generated widths reach 0.11 m, sizes x1.15):
 a blob wider than this may be two fillets side by side (the segmenter checks it by height)."""
+
+
+def physics_worker_limit() -> int:
+    """The most physics worker processes this machine runs: one per core (more only add switching), at most
+    MAX_PHYSICS_WORKERS."""
+    return min(os.cpu_count() or 1, MAX_PHYSICS_WORKERS)

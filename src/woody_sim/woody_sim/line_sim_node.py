@@ -42,6 +42,7 @@ from woody_common.line import (
     MAX_BELT_WIDTH_M,
     MAX_FILLETS,
     MAX_LANES,
+    MAX_PHYSICS_WORKERS,
     MAX_SEED,
     MAX_SIDE_RATE_HZ,
     MAX_SPAWN_DURATION_S,
@@ -79,7 +80,7 @@ from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.sensor_model import ENCODINGS, sensor_preset, to_message_array
 from woody_sim.side_gate import SideFrameGate
 from woody_sim.spawn_schedule import SpawnSchedule
-from woody_sim.split_world import MAX_PHYSICS_WORKERS, SplitLineWorld
+from woody_sim.split_world import SplitLineWorld
 
 SENSOR_STREAM = 11
 """Second seed word of the camera error model's random stream (the first is the node's ``seed``)."""

@@ -25,12 +25,12 @@ workers only: this process's world takes no spawns, since it cannot be replaced.
 from __future__ import annotations
 
 import multiprocessing.connection as mpc
-import os
 import traceback
 from typing import Any
 
 import numpy as np
 
+from woody_common.line import physics_worker_limit
 from woody_sim.child_process import ChildProcess, parent_messages
 from woody_sim.fillet_model import FilletModel
 from woody_sim.frame_schedule import DUE_SLACK
@@ -45,16 +45,12 @@ from woody_sim.line_world import (
 )
 from woody_sim.meshes import FilletMesh
 
-MAX_PHYSICS_WORKERS = 64
-"""The most worker processes a SplitLineWorld starts; :func:`check_workers` also caps them at the core count."""
-
 
 def check_workers(workers: int) -> int:
-    """``workers`` if this machine has a core for each (more only add switching), else ValueError."""
-    cores = os.cpu_count() or 1
-    if not 1 <= workers <= min(cores, MAX_PHYSICS_WORKERS):
-        raise ValueError(f"physics workers must be 1..{min(cores, MAX_PHYSICS_WORKERS)} (the cores of this "
-                         f"machine), got {workers}")
+    """``workers`` if this machine has a core for each (woody_common.line.physics_worker_limit), else ValueError."""
+    limit = physics_worker_limit()
+    if not 1 <= workers <= limit:
+        raise ValueError(f"physics workers must be 1..{limit} (the cores of this machine), got {workers}")
     return workers
 
 

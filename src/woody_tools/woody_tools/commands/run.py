@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import re
 import sys
 from pathlib import Path
@@ -33,6 +32,7 @@ from woody_common.line import (
     check_lane_pitch,
     fpm_to_mps,
     max_fillets_per_minute,
+    physics_worker_limit,
 )
 from woody_sim.camera_description import is_camera_file, load_camera
 from woody_sim.line_conditions import LINE_PRESETS, MAX_LATERAL_M, MAX_YAW_DEG, SCALE_RANGE, LineConditions
@@ -203,7 +203,7 @@ def _validate(args: argparse.Namespace) -> None:
 
 
 def _validate_physics(args: argparse.Namespace) -> None:
-    cores = os.cpu_count() or 1
+    cores = physics_worker_limit()
     if args.physics_workers is not None and not 0 <= args.physics_workers <= cores:
         raise RunRefused(f"--physics-workers must be 0..{cores} (this machine's cores), got {args.physics_workers}")
     if args.physics_recycle is not None:

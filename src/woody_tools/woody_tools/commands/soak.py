@@ -19,12 +19,11 @@ import time
 from pathlib import Path
 
 from woody_common.calibration import resolved_calibration
-from woody_common.line import MAX_LANES, REFERENCE_SPEED_FPM, fpm_to_mps
+from woody_common.line import MAX_LANES, REFERENCE_SPEED_FPM, fpm_to_mps, physics_worker_limit
 from woody_experiments import soak
 from woody_experiments.mesh_sets import load_meshes
 from woody_sim.line_world import calibrated_config
 from woody_sim.soak import SHIFT_SPACING_M, ShiftResult, growth_mb_per_1000, shift
-from woody_sim.split_world import MAX_PHYSICS_WORKERS
 
 MAX_SHIFT_FILLETS = 1_000_000
 
@@ -86,7 +85,7 @@ def run_shift(args: argparse.Namespace) -> int:
     workers; exit 1 on a blow-up."""
     from tqdm import tqdm
 
-    cores = min(os.cpu_count() or 1, MAX_PHYSICS_WORKERS)
+    cores = physics_worker_limit()
     rule = (f"--shift must be 1..{MAX_SHIFT_FILLETS}, --lanes 1..{MAX_LANES}, --physics-workers 0..{cores} "
             "(the cores) and --recycle-after >= 0 (above 0 with --physics-workers >= 1)")
     ok = (1 <= args.shift <= MAX_SHIFT_FILLETS and 1 <= args.lanes <= MAX_LANES and 0 <= args.physics_workers <= cores

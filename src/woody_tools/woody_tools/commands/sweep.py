@@ -170,6 +170,15 @@ FOLDER_SETTINGS = {"top_camera": "default", "yaw_sd": 0.0, "lane_pitch": LANE_PI
                    "physics": PhysicsConfig(**PAPER_PHYSICS).resolution}
 """Settings all the runs in one --out folder share (runs.csv does not repeat them per row), with the value a folder
 that does not record one was made with."""
+SETTING_NAMES = {"physics": "the physics"}
+"""How a refusal names a folder setting that no option sets (the others by their option)."""
+
+
+def _folder_settings(args: argparse.Namespace) -> dict:
+    """This sweep's value of every FOLDER_SETTINGS entry (the physics is PhysicsConfig's default: no option sets
+    it)."""
+    return {"top_camera": args.top_camera, "yaw_sd": args.yaw_sd, "lane_pitch": args.lane_pitch,
+            "speed_change": args.speed_change, "physics": PhysicsConfig().resolution}
 
 
 def _folder_mismatch(meta_path: Path, args: argparse.Namespace) -> str | None:
@@ -178,10 +187,9 @@ def _folder_mismatch(meta_path: Path, args: argparse.Namespace) -> str | None:
     if not meta_path.exists():
         return None
     invocations = json.loads(meta_path.read_text()).get("invocations", [])
-    for name, default in FOLDER_SETTINGS.items():
-        before = {i.get(name, default) for i in invocations}
-        flag = "the physics" if name == "physics" else "--" + name.replace("_", "-")
-        now = PhysicsConfig().resolution if name == "physics" else getattr(args, name)
+    for name, now in _folder_settings(args).items():
+        before = {i.get(name, FOLDER_SETTINGS[name]) for i in invocations}
+        flag = SETTING_NAMES.get(name, "--" + name.replace("_", "-"))
         if len(before) == 1 and now not in before:
             return f"{flag} {before.pop()}; use another --out for {flag} {now}"
     return None
@@ -221,8 +229,7 @@ def _update_meta(path: Path, stats: cluster.Throughput, args: argparse.Namespace
             "evaluations": stats.evaluations, "wall_s": round(stats.wall_s, 2), "jobs": stats.workers,
             "cores": os.cpu_count(), "scheduler": args.scheduler or "local", **stats.as_meta(),
             "meshes": args.meshes, "n_meshes": n_meshes, "mass": mass, "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
-            "top_camera": args.top_camera, "yaw_sd": args.yaw_sd, "lane_pitch": args.lane_pitch,
-            "speed_change": args.speed_change, "physics": PhysicsConfig().resolution,
+            **_folder_settings(args),
         })
     meta["evaluations"] = sum(i["evaluations"] for i in meta["invocations"])
     meta["wall_s"] = sum(i["wall_s"] for i in meta["invocations"])
