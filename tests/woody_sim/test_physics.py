@@ -132,6 +132,16 @@ def test_chain_is_stable_over_the_roller_and_fallen_fillets_are_removed(fillet: 
     assert rows[:, 5].max() < 40.0  # no hinge whipping
 
 
+@pytest.mark.parametrize("settings", [{"slice_shape": "capsule"}, {"island_sleeping": True}])
+def test_the_settings_tables_other_contacts_and_sleeping_still_carry_a_chain_over_the_roller(
+        fillet: FilletMesh, settings: dict) -> None:
+    with LineWorld(geometry=NEAR_EDGE, config=PhysicsConfig(**settings)) as world:
+        fid = world.spawn(fillet, 0.0, 1, MASS, SPEED)
+        rows = run_to_the_floor(world, fid)
+        assert fid not in world.fillets and world.take_removed() == [fid]
+    assert rows[-1, 3] < world.geometry.remove_z + 0.05 and rows[:, 4].max() < 4.0
+
+
 def test_ids_are_unique_and_metadata_is_kept(fillet: FilletMesh) -> None:
     with LineWorld() as world:
         a = world.spawn(fillet, 0.0, 0, 20.0, SPEED)
@@ -202,7 +212,8 @@ def test_a_spawn_time_outside_the_past_is_refused(fillet: FilletMesh, spawn_time
 @pytest.mark.parametrize(
     ("kwargs", "reason"),
     [({"n_segments": 1}, "N"), ({"dt": 0.5}, "dt"), ({"damping": -0.1}, "damping"),
-     ({"inertia_floor": -0.1}, "inertia_floor"), ({"inertia_floor": 1.5}, "inertia_floor")],
+     ({"inertia_floor": -0.1}, "inertia_floor"), ({"inertia_floor": 1.5}, "inertia_floor"),
+     ({"slice_shape": "sphere"}, "slice_shape")],
 )
 def test_bad_config_raises_value_error(kwargs: dict, reason: str) -> None:
     with pytest.raises(ValueError, match=reason):

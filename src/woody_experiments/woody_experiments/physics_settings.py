@@ -45,6 +45,8 @@ SETTINGS: dict[str, dict] = {
     "30 slices, 360 Hz": {"n_segments": 30, "dt": 1.0 / 360.0},
     "24 slices, 360 Hz (the default)": {"n_segments": 24, "dt": 1.0 / 360.0},
     "20 slices, 360 Hz": {"n_segments": 20, "dt": 1.0 / 360.0},
+    "24 slices, 360 Hz, capsule slices": {"n_segments": 24, "dt": 1.0 / 360.0, "slice_shape": "capsule"},
+    "24 slices, 360 Hz, island sleeping": {"n_segments": 24, "dt": 1.0 / 360.0, "island_sleeping": True},
 }
 """Name -> PhysicsConfig overrides; the first is the paper's chain (20 solver iterations), which every other is
 compared with."""

@@ -83,6 +83,9 @@ BLOWUP_SPEED = 12.0
 """m/s no segment reaches on this line (free fall past the roller stays under ~4 m/s): faster is a numerical blow-up."""
 
 
+SLICE_SHAPES = ("box", "capsule")
+
+
 @dataclass(frozen=True)
 class PhysicsConfig:
     """Integration and contact settings; the defaults are the validated production values."""
@@ -108,6 +111,13 @@ class PhysicsConfig:
     inertia_floor: float = 0.3
     """Least inertia of a segment about its hinge axis, as a fraction of the segments' mean (an armature on the
     thin tip slices, without which pybullet's contact solver whips them; see :func:`segment_inertias`)."""
+    island_sleeping: bool = False
+    """Let Bullet put a chain to sleep once it comes to rest (its simulation island drops out of the solver). On
+    the line no chain rests: each rides the belt kinematically until the roller and is removed once it fell."""
+    slice_shape: str = "box"
+    """Collision shape of a slice: 'box' (its bounding box: up to four contact points with the belt or the
+    roller) or 'capsule' (a capsule across the flow, as wide as the box, its radius the smaller of the box's
+    half length and half thickness, its bottom on the box's bottom: one or two contact points)."""
 
     @property
     def resolution(self) -> str:
@@ -135,6 +145,8 @@ class PhysicsConfig:
             raise ValueError(f"damping must be >= 0, got {self.damping}")
         if not 0.0 <= self.inertia_floor <= 1.0:
             raise ValueError(f"inertia_floor must be within 0..1, got {self.inertia_floor}")
+        if self.slice_shape not in SLICE_SHAPES:
+            raise ValueError(f"slice_shape must be one of {', '.join(SLICE_SHAPES)}, got {self.slice_shape!r}")
         if self.activation_margin is not None and not self.activation_margin >= 0.0:
             raise ValueError(f"activation_margin must be >= 0 or None, got {self.activation_margin}")
 
@@ -484,18 +496,24 @@ class LineWorld:
         i - 1, so its box is offset from its link frame by centre - hinge.
         """
         if mesh not in physics.shapes:
-            c = physics.client
-            half, centers, hinges = model.box_half_extents, model.box_centers, model.joint_positions
-            shapes = [p.createCollisionShape(p.GEOM_BOX, halfExtents=half[0].tolist(), physicsClientId=c)]
-            for i in range(1, model.n_segments):
-                offset = (centers[i] - hinges[i - 1]).tolist()
-                shapes.append(
-                    p.createCollisionShape(
-                        p.GEOM_BOX, halfExtents=half[i].tolist(), collisionFramePosition=offset, physicsClientId=c
-                    )
-                )
-            physics.shapes[mesh] = shapes
+            centers, hinges = model.box_centers, model.joint_positions
+            offsets = [np.zeros(3)] + [centers[i] - hinges[i - 1] for i in range(1, model.n_segments)]
+            physics.shapes[mesh] = [self._slice_shape(physics.client, half, offset)
+                                    for half, offset in zip(model.box_half_extents, offsets)]
         return physics.shapes[mesh]
+
+    def _slice_shape(self, client: int, half: np.ndarray, offset: np.ndarray) -> int:
+        """One slice's collision shape (``PhysicsConfig.slice_shape``) around a box of half extents ``half``
+        centred ``offset`` from its link frame."""
+        if self.config.slice_shape == "box":
+            return p.createCollisionShape(p.GEOM_BOX, halfExtents=half.tolist(), collisionFramePosition=offset.tolist(),
+                                          physicsClientId=client)
+        radius = float(min(half[0], half[2]))
+        bottom = offset + np.array([0.0, 0.0, radius - half[2]])
+        across = p.getQuaternionFromEuler([math.pi / 2.0, 0.0, 0.0])  # the capsule's axis (z) along y
+        return p.createCollisionShape(p.GEOM_CAPSULE, radius=radius, height=max(2.0 * (half[1] - radius), 1e-4),
+                                      collisionFramePosition=bottom.tolist(), collisionFrameOrientation=across,
+                                      physicsClientId=client)
 
     def _activate(self, fillet: _Fillet) -> None:
         """Turn a kinematic fillet into a pybullet chain at its current pose, flat and at line speed.
@@ -536,6 +554,8 @@ class LineWorld:
         fillet.inertias, fillet.joint_offsets = inertias, centers[1:] - hinges
         for link in range(-1, n - 1):
             limits = {} if link < 0 else {"jointLowerLimit": -JOINT_LIMIT, "jointUpperLimit": JOINT_LIMIT}
+            if self.config.island_sleeping:
+                limits["activationState"] = p.ACTIVATION_STATE_ENABLE_SLEEPING
             p.changeDynamics(
                 body, link, localInertiaDiagonal=inertias[link + 1].tolist(), lateralFriction=1.0, restitution=0.0,
                 linearDamping=0.0, angularDamping=0.0, physicsClientId=c, **limits,
