@@ -77,3 +77,30 @@ def test_yaw_sd_alone_turns_each_fillet_by_its_own_draw(ros_node, ros_domain, tm
         turned = place_mesh(straight[truth.mesh], placement)
         assert (truth.length, truth.width) == pytest.approx((turned.length, turned.width), abs=1e-6)
     assert len({t.mesh for t in truths}) == 1 and len({round(t.length, 5) for t in truths}) == 3
+
+
+def test_a_crowded_line_lays_no_fillet_into_another(ros_node, ros_domain, tmp_path):
+    """Six lanes 8 cm apart with fillets 0.16 m apart in a lane: many placed footprints would overlap their
+    neighbours' at the spawn point; each waits until it has room, so no two footprints ever overlap on the belt."""
+    import numpy as np
+
+    from woody_common.stamps import stamp_to_seconds
+    from woody_sim.line_conditions import LINE_PRESETS, place_mesh, placement_for
+    from woody_sim.meshes import load_mesh_set
+    from woody_sim.spawn_clearance import OVERLAP_AREA_M2, footprint, overlap_area
+
+    params = {"line": "messy", "lanes": 6, "lane_pitch_m": 0.08, "spawn_spacing_m": 0.16, "duration_s": 2.0,
+              "side_rate_hz": 0.0}
+    truths = ground_truth(ros_node, ros_domain, tmp_path, params, count=24)
+    straight = {m.name: m for m in load_mesh_set("builtin")[0]}
+    laid = []
+    for truth in sorted(truths, key=lambda t: stamp_to_seconds(t.header.stamp)):
+        placed = place_mesh(straight[truth.mesh], placement_for(LINE_PRESETS["messy"], 7, truth.fillet_id))
+        shape = footprint(placed.mesh.vertices, truth.position.x, truth.position.y)
+        at = stamp_to_seconds(truth.header.stamp)
+        for other, other_at in laid:
+            carried = other + np.array([truth.line_speed * (at - other_at), 0.0], dtype=np.float32)
+            assert overlap_area(shape, carried) <= OVERLAP_AREA_M2
+        laid.append((shape, at))
+    assert sorted(t.fillet_id for t in truths) != [t.fillet_id for t in
+                                                  sorted(truths, key=lambda t: stamp_to_seconds(t.header.stamp))]

@@ -41,7 +41,7 @@ SPACING_RULES = {
              "of a lane come close but never overlap",
     GAPS: "the mesh set's mean placed length (each mesh's footprint box under the messy line's turns and sizes, "
           "averaged) + 0.02 m: a 2 cm gap between consecutive fillets of a lane on average, less or none between "
-          "long or turned ones",
+          "long or turned ones (a fillet that would overlap another waits for room at the spawn point)",
 }
 """The conditions whose lanes are 0.12 m apart and whose in-lane spacing follows the mesh set: how it is set."""
 CROWDED_LANE_PITCH_M = 0.12

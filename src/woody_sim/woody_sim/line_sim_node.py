@@ -17,6 +17,7 @@ import sys
 import threading
 import time
 from collections import deque
+from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
@@ -65,6 +66,7 @@ from woody_sim.line_conditions import (
     MAX_LATERAL_M,
     MAX_YAW_DEG,
     SCALE_RANGE,
+    FilletPlacement,
     LineConditions,
     line_preset,
     longest_placed_length,
@@ -74,11 +76,12 @@ from woody_sim.line_conditions import (
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_sim.line_world import MAX_MASS, LineWorld, PhysicsConfig
 from woody_sim.loop_phases import PhaseClock
-from woody_sim.meshes import MAX_YAW_SD_DEG, MeshError, checked_mesh_set, load_mesh
+from woody_sim.meshes import MAX_YAW_SD_DEG, FilletMesh, MeshError, checked_mesh_set, load_mesh
 from woody_sim.pacing import LeadLimiter
 from woody_sim.rendering import RenderProcess, camera_info_fields
 from woody_sim.sensor_model import ENCODINGS, sensor_preset, to_message_array
 from woody_sim.side_gate import SideFrameGate
+from woody_sim.spawn_clearance import SpawnClearance, footprint
 from woody_sim.spawn_schedule import SpawnSchedule
 from woody_sim.split_world import SplitLineWorld
 
@@ -94,6 +97,23 @@ CHILD_START = "fork"
 """How the render and physics processes start: forked, they begin with this process's modules already imported
 (started fresh, each imported pybullet, numba and the renderer again, ~2 s on two busy cores, while the line
 waited). They never touch ROS: only numpy, pybullet and the compiled kernels, over a pipe."""
+
+
+@dataclass
+class DrawnFillet:
+    """A fillet the line has drawn a placement for, before it is laid on the belt."""
+
+    index: int
+    """Its placement draw's index, which becomes its id."""
+    mesh: FilletMesh
+    placement: FilletPlacement
+    placed: FilletMesh
+    lane: int
+    k: float
+    footprint: np.ndarray
+    """Its footprint at the spawn point (woody_sim.spawn_clearance.footprint)."""
+    waited: bool = False
+    """Whether it had to wait for room at the spawn point."""
 
 
 class LineSim(Node):
@@ -321,15 +341,24 @@ class LineSim(Node):
         self.schedule = SpawnSchedule(meshes=meshes, k_values=self.k_values, lanes=p.lanes,
                                       interval_s=self._interval(), seed=p.seed)
         self.spawned = 0
+        self.drawn = 0
+        """Placements drawn: each fillet's id is its draw's index, so its placement is placement_for(seed, id)."""
+        self._waiting: dict[int, deque] = {lane: deque() for lane in range(p.lanes)}
+        """Per lane, the scheduled fillets waiting for room at the spawn point, in order."""
+        self.clearance = SpawnClearance(reach_m=longest_placed_length(meshes, self.conditions))
+        self.waited = 0
+        self._belt_time = 0.0
+        """Sim time up to which the clearance has followed the belt."""
+        """Scheduled fillets that waited for room at the spawn point."""
         self._placed: dict[int, tuple] = {}  # fillet id -> (its own placed mesh, its visuals), released on removal
         self.speed_change = (fpm_to_mps(p.change_fpm), p.change_at, p.change_fpm) if p.change_fpm else None
         if self.speed_change:
             self.world.change_speed(self.speed_change[0], p.change_at)
-        longest = longest_placed_length(meshes, self.conditions)
+        longest = self.clearance.reach_m
         if self._spacing() < longest:
             self.get_logger().warning(f"in-lane spacing {self._spacing():.3f} m is below the longest placed "
-                                      f"fillet ({longest:.3f} m): fillets of a lane may overlap (they do not "
-                                      "collide)")
+                                      f"fillet ({longest:.3f} m): a fillet waits at the spawn point until it "
+                                      "has room, so a lane may carry fewer fillets than its spacing says")
         self.side_gate = SideFrameGate(idle_period_s=1.0 / p.side_idle)
 
     def _interval(self) -> float:
@@ -395,18 +424,31 @@ class LineSim(Node):
     # ------------------------------------------------------------------ spawning
 
     def spawn(self, mesh, k: float, lane: int, mass: float, speed: float) -> int:
-        """Spawn ``mesh`` placed by the line conditions (the spawn count indexes its draw); its chain weighs
-        ``mass`` x scale^3. The ground truth carries the placed footprint and the offset position."""
-        placement = placement_for(self.conditions, self.seed, self.spawned)
+        """Spawn ``mesh`` now, placed by the line conditions' next draw (see :meth:`_lay`)."""
+        return self._lay(self._draw(mesh, lane, k), mass, speed)
+
+    def _draw(self, mesh, lane: int, k: float) -> DrawnFillet:
+        """The next placement draw for a fillet of ``mesh`` in ``lane``; its index is the fillet's id."""
+        index, self.drawn = self.drawn, self.drawn + 1
+        placement = placement_for(self.conditions, self.seed, index)
         placed = place_mesh(mesh, placement)
+        shape = footprint(placed.mesh.vertices, self.geometry.spawn_x,
+                          self.geometry.lane_y(lane) + placement.lateral_offset_m)
+        return DrawnFillet(index, mesh, placement, placed, lane, float(k), shape)
+
+    def _lay(self, fillet: DrawnFillet, mass: float, speed: float) -> int:
+        """Lay a drawn fillet on the belt at the spawn point; its chain weighs ``mass`` x scale^3. The ground truth
+        carries the placed footprint and the offset position."""
+        placement, placed, lane = fillet.placement, fillet.placed, fillet.lane
         mass = mass * placement.scale ** 3
-        fillet_id = self.world.spawn(placed, k=k, lane=lane, mass=mass, speed_mps=speed,
+        fillet_id = self.world.spawn(placed, k=fillet.k, lane=lane, mass=mass, speed_mps=speed, fillet_id=fillet.index,
                                      lateral_offset=placement.lateral_offset_m)
+        self.clearance.lay(fillet.footprint)
         model = self.world.model(fillet_id)
         self.renderer.add_fillet(fillet_id, lane, model.visuals)
-        if placed is not mesh:
+        if placed is not fillet.mesh:
             self._placed[fillet_id] = (placed, model.visuals)
-        msg = FilletSpawn(fillet_id=fillet_id, lane=lane, mesh=mesh.name, stiffness=float(k),
+        msg = FilletSpawn(fillet_id=fillet_id, lane=lane, mesh=fillet.mesh.name, stiffness=fillet.k,
                           damping=float(self.world.config.damping), mass=float(mass), line_speed=float(speed),
                           segments=model.n_segments, length=float(placed.length), width=float(placed.width),
                           thickness=float(placed.thickness))
@@ -441,15 +483,22 @@ class LineSim(Node):
                                f"in-lane spacing now {self._spacing():.3f} m")
 
     def _spawn_due(self) -> None:
+        """Draw the scheduled fillets, then lay each lane's waiting ones that have room."""
+        self.clearance.advance(self.speed * (self.world.time - self._belt_time))
+        self._belt_time = self.world.time
         self._follow_speed_change()
-        limit_reached = (self.max_fillets and self.spawned >= self.max_fillets) or (
+        limit_reached = (self.max_fillets and self.drawn >= self.max_fillets) or (
             self.spawn_duration and self.world.time >= self.spawn_duration)
-        if limit_reached:
-            return
-        for mesh, k, lane in self.schedule.due(self.world.time):
-            if self.max_fillets and self.spawned >= self.max_fillets:
-                return
-            self.spawn(mesh, k, lane, self.mass, self.speed)
+        for mesh, k, lane in ([] if limit_reached else self.schedule.due(self.world.time)):
+            if self.max_fillets and self.drawn >= self.max_fillets:
+                break
+            self._waiting[lane].append(self._draw(mesh, lane, k))
+        for queue in self._waiting.values():
+            while queue and self.clearance.clear(queue[0].footprint):
+                self._lay(queue.popleft(), self.mass, self.speed)
+            if queue and not queue[0].waited:
+                queue[0].waited = True
+                self.waited += 1
 
     # ------------------------------------------------------------------ publishing
 
@@ -529,6 +578,10 @@ class LineSim(Node):
         self.get_logger().info(f"stopped at sim time {self.world.time:.2f} s after {elapsed:.1f} s wall "
                                f"(rtf {(self.world.time - sim_start) / max(elapsed, 1e-9):.2f}x), "
                                f"{self.spawned} fillets spawned")
+        if self.waited:
+            waiting = sum(len(queue) for queue in self._waiting.values())
+            self.get_logger().info(f"{self.waited} fillets waited for room at the spawn point (no fillet is laid "
+                                   f"into another); {waiting} still waiting at the end")
         if isinstance(self.world, SplitLineWorld) and self.world.recycle_after:
             self.get_logger().info(f"physics workers: {self.world.workers_started} started, each replaced after "
                                    f"{self.world.recycle_after} fillets")

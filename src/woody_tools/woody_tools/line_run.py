@@ -121,7 +121,8 @@ def _check_meshes(spec: str) -> tuple[list, list[str]]:
 
 
 def _crowding_notes(meshes: list, args: argparse.Namespace) -> list[str]:
-    """The note line_sim logs when fillets of a lane may overlap (spacing below the longest placed fillet)."""
+    """The note line_sim logs when fillets of a lane may have to wait for room (spacing below the longest placed
+    fillet)."""
     speeds = dict.fromkeys((args.speed_fpm, args.speed_change_fpm or args.speed_fpm))
     if args.fillets_per_minute is not None:
         spacing = min(spacing_at_rate(fpm_to_mps(fpm), args.fillets_per_minute) for fpm in speeds)
@@ -132,8 +133,8 @@ def _crowding_notes(meshes: list, args: argparse.Namespace) -> list[str]:
     longest = longest_placed_length(meshes, args.conditions)
     if spacing >= longest:
         return []
-    return [f"in-lane spacing {spacing:.3f} m is below the longest placed fillet ({longest:.3f} m): fillets of a "
-            f"lane may overlap (they do not collide)"]
+    return [f"in-lane spacing {spacing:.3f} m is below the longest placed fillet ({longest:.3f} m): a fillet waits "
+            f"at the spawn point until it has room, so a lane may carry fewer fillets than its spacing says"]
 
 
 class LineMonitor:
