@@ -22,9 +22,8 @@ the leading edge is the contour's max v, the trailing edge its min v):
    If that frame is more than ``GAP_FRAMES`` frames of the fillet's own
    approach speed past the point (frames lost in a burst around the edge, a
    real camera's or network's dropped frames), it shows a fillet already
-   falling off and would set Φ far too high: Φ is absent (a late close), and
-   only a line score the frames around its own moment hold is kept (see
-   below). Frames lost inside the window are found by stamp: a step
+   falling off and would score it far too high: the result is unscored
+   instead of wrong. Frames lost inside the window are found by stamp: a step
    between the fillet's sightings of more than ``GAP_FRAMES`` frame intervals
    (the approach's shortest step) into a window frame means Φ is a maximum over
    part of the window, so Φ and its terms are absent (NaN) with the reason, and
@@ -54,8 +53,8 @@ bends further as it tips, and a frame a neighbour's outline joined stands above
 the frames after it. The evaluator keeps scoring past the
 centroid crossing until that moment is passed and one frame more has confirmed
 the frame past it (a fillet sent blunt end first has its centroid ahead of
-mid-body, so its window closes earlier); a track that ends after the window
-closed, or after that moment was confirmed, is scored on the frames it has. It also
+mid-body, so its window closes earlier); a track that ends before that frame
+is scored on the frames it has. It also
 reports what the decision may depend on, all measured on the reference
 outline and the approach: the fillet's speed in the image, which end leads
 (:func:`leading_end`), how far it lies turned from the flow
@@ -87,10 +86,9 @@ part hanging over the roller, moved back to where it hangs), which decides the w
 on the outline in the image, against a reference made from the image outline of the same
 flat frame and clipped from its own trailing edge.
 
-A result is produced exactly once per evaluator: 'scored' when the line score
-is read, otherwise 'unscored' with a reason (no reference because the track
-started at or past the edge, the track ended before the measuring point was
-confirmed, or no clean frames around it).
+A result is produced exactly once per evaluator: 'scored' when the window
+closes, otherwise 'unscored' with a reason (no reference because the track
+started at or past the edge, or the track ended before the window closed).
 """
 
 from __future__ import annotations
@@ -535,8 +533,6 @@ class ShapeEvaluator:
         """Time since the previous sighting of this fillet (s)."""
         self._window_gap = 0.0
         """The longest step into a window frame that was a gap (s; 0 without one)."""
-        self._late_close = 0.0
-        """How far (px) past the fillet's centroid the window closed when frames were lost there (0: on time)."""
         self._sightings = 0
         self._approach: list[tuple[float, float]] = []
         """(stamp, leading row) of the flat frames: the fillet's own speed and frame interval in the image."""
@@ -642,7 +638,7 @@ class ShapeEvaluator:
             self._paper_trace.append(frame if image is points else self._score_image(image, stamp, overhang))
             overshoot = trailing + reference.centroid_offset_px - self.edge_row
             if overshoot >= 0.0 and overshoot > GAP_FRAMES * self._advance_per_frame():
-                self._late_close = overshoot
+                return self._finish(STATUS_UNSCORED, REASON_LATE_CLOSE.format(overshoot))
             self._closed = overshoot >= 0.0
         if self._closed and self._confirmed():
             return self._finish_line()
@@ -714,18 +710,9 @@ class ShapeEvaluator:
             line_phi, nearer = extrapolate_at(own, self.line_fraction, step)
         if nearer is None or not math.isfinite(line_phi):
             return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
+        reason = REASON_WINDOW_GAP.format(self._window_gap) if self._window_gap else ""
         nearer = kept[nearer]
-        return self._finish(STATUS_SCORED, self._phi_absent_reason(), line_phi, self._contours[nearer],
-                            frames[nearer].stamp)
-
-    def _phi_absent_reason(self) -> str:
-        """Why the paper's Φ is absent from a result scored on ``line_phi`` ('' when it is present)."""
-        reasons = [REASON_WINDOW_GAP.format(self._window_gap)] if self._window_gap else []
-        if not self._closed:
-            reasons.append(REASON_LOST_IN_WINDOW)
-        if self._late_close:
-            reasons.append(REASON_LATE_CLOSE.format(self._late_close))
-        return "; ".join(reasons)
+        return self._finish(STATUS_SCORED, reason, line_phi, self._contours[nearer], frames[nearer].stamp)
 
     def _advance_per_frame(self) -> float:
         """Rows the fillet moved per camera frame while flat (inf when too few frames tell)."""
@@ -745,7 +732,7 @@ class ShapeEvaluator:
         """The track ended: the unscored result, or None if a result was already produced."""
         if self._phase is _Phase.DONE:
             return None
-        if self._closed or self._confirmed():
+        if self._closed:
             return self._finish_line()  # scored on the frames around the measuring point, if it was passed
         reason = REASON_LOST_IN_WINDOW if self._trace else REASON_LOST_BEFORE_EDGE
         return self._finish(STATUS_UNSCORED, reason)
@@ -767,7 +754,7 @@ class ShapeEvaluator:
                 line_contour: np.ndarray | None = None, line_stamp: float | None = None) -> ShapeResult:
         self._phase = _Phase.DONE
         referenced = self._reference is not None
-        complete = self._closed and not self._window_gap and not self._late_close
+        complete = self._closed and not self._window_gap
         window = self._paper_trace if complete else []
         return ShapeResult(
             status=status,
