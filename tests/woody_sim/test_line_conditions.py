@@ -13,6 +13,7 @@ from woody_sim.line_conditions import (
     LINE_PRESETS,
     FilletPlacement,
     LineConditions,
+    crowding_note,
     draw_placement,
     line_preset,
     longest_placed_length,
@@ -133,3 +134,10 @@ def test_lane_pitch_and_spawn_rate_limits_are_one_line():
         check_lane_pitch(3, 0.05)
     speed = 0.508
     assert spacing_at_rate(speed, max_fillets_per_minute(speed)) == pytest.approx(MIN_SPAWN_SPACING_M)
+
+
+def test_the_crowding_note_is_said_only_below_the_longest_placed_fillet():
+    assert crowding_note(0.27, 0.26) == "" and crowding_note(0.26, 0.26) == ""
+    assert crowding_note(0.2, 0.26) == ("in-lane spacing 0.200 m is below the longest placed fillet (0.260 m): a "
+                                        "fillet waits at the spawn point until it has room, so a lane may carry "
+                                        "fewer fillets than its spacing says")

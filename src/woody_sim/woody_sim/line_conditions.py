@@ -158,6 +158,15 @@ def longest_placed_length(meshes: list[FilletMesh], conditions: LineConditions) 
     return conditions.scale_max * max((extent(m) for m in meshes), default=0.0)
 
 
+def crowding_note(spacing_m: float, longest_m: float) -> str:
+    """What line_sim logs (and `woody run` says before it starts) when in-lane spacing is below the longest placed
+    fillet ('' when it is not)."""
+    if spacing_m >= longest_m:
+        return ""
+    return (f"in-lane spacing {spacing_m:.3f} m is below the longest placed fillet ({longest_m:.3f} m): a fillet "
+            "waits at the spawn point until it has room, so a lane may carry fewer fillets than its spacing says")
+
+
 MEAN_PLACEMENT_DRAWS = 1000
 """Placements (seed 0, the first spawn indices) that :func:`mean_placed_length` averages over."""
 

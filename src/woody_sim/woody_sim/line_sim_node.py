@@ -68,6 +68,7 @@ from woody_sim.line_conditions import (
     SCALE_RANGE,
     FilletPlacement,
     LineConditions,
+    crowding_note,
     line_preset,
     longest_placed_length,
     place_mesh,
@@ -345,20 +346,19 @@ class LineSim(Node):
         """Placements drawn: each fillet's id is its draw's index, so its placement is placement_for(seed, id)."""
         self._waiting: dict[int, deque] = {lane: deque() for lane in range(p.lanes)}
         """Per lane, the scheduled fillets waiting for room at the spawn point, in order."""
-        self.clearance = SpawnClearance(reach_m=longest_placed_length(meshes, self.conditions))
+        longest = longest_placed_length(meshes, self.conditions)
+        self.clearance = SpawnClearance(reach_m=longest)
         self.waited = 0
+        """Scheduled fillets that waited for room at the spawn point."""
         self._belt_time = 0.0
         """Sim time up to which the clearance has followed the belt."""
-        """Scheduled fillets that waited for room at the spawn point."""
         self._placed: dict[int, tuple] = {}  # fillet id -> (its own placed mesh, its visuals), released on removal
         self.speed_change = (fpm_to_mps(p.change_fpm), p.change_at, p.change_fpm) if p.change_fpm else None
         if self.speed_change:
             self.world.change_speed(self.speed_change[0], p.change_at)
-        longest = self.clearance.reach_m
-        if self._spacing() < longest:
-            self.get_logger().warning(f"in-lane spacing {self._spacing():.3f} m is below the longest placed "
-                                      f"fillet ({longest:.3f} m): a fillet waits at the spawn point until it "
-                                      "has room, so a lane may carry fewer fillets than its spacing says")
+        note = crowding_note(self._spacing(), longest)
+        if note:
+            self.get_logger().warning(note)
         self.side_gate = SideFrameGate(idle_period_s=1.0 / p.side_idle)
 
     def _interval(self) -> float:

@@ -54,7 +54,7 @@ from woody_experiments.run_report import (
     write_csv,
 )
 from woody_sim.camera_description import is_camera_file, load_camera
-from woody_sim.line_conditions import LineConditions, longest_placed_length
+from woody_sim.line_conditions import LineConditions, crowding_note, longest_placed_length
 from woody_sim.line_geometry import LineGeometry, top_camera_preset
 from woody_tools.cpu_usage import CpuAccounting
 from woody_tools.processes import STOP, DomainInUse, NodeProcess, lease_domain
@@ -130,11 +130,8 @@ def _crowding_notes(meshes: list, args: argparse.Namespace) -> list[str]:
         spacing = args.spacing
     else:
         return []
-    longest = longest_placed_length(meshes, args.conditions)
-    if spacing >= longest:
-        return []
-    return [f"in-lane spacing {spacing:.3f} m is below the longest placed fillet ({longest:.3f} m): a fillet waits "
-            f"at the spawn point until it has room, so a lane may carry fewer fillets than its spacing says"]
+    note = crowding_note(spacing, longest_placed_length(meshes, args.conditions))
+    return [note] if note else []
 
 
 class LineMonitor:
