@@ -124,6 +124,17 @@ def test_unscored_verdict_when_the_track_ends_in_the_window():
     assert result.fillet_id == 3 and result.stamp == verdict.shape.stamp and result.side is None
 
 
+def test_a_fillet_its_track_lost_in_the_window_gets_its_verdict_in_time_for_the_gate_not_when_the_track_ends():
+    grader = FilletGrader(EDGE)
+    shapes = contours(90)
+    closes = closing_stamp(shapes)
+    out = feed(grader, 3, 0, shapes[: int(round(closes * FPS)) - 1], end=True, extra_after=15)
+    ((published, verdict),) = out  # the tracker ends the track 15 frames later: no second verdict then
+    assert verdict.label == "unscored" and verdict.reason.startswith("no clean frame closed the evaluation window")
+    assert published <= closes + 3 / FPS
+    assert closes - 2 / FPS <= verdict.shape.stamp <= closes  # due at the edge; a scored one is stamped a frame on
+
+
 def test_a_piece_split_off_past_the_edge_gets_no_verdict_but_a_fillet_appearing_there_alone_does():
     grader = FilletGrader(EDGE, GradingRules(threshold=1.0))
     shapes = contours(90)

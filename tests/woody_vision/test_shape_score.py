@@ -22,6 +22,7 @@ from woody_vision.shape_score import (
     LINE_OVERHANG_FRACTION,
     REASON_LOST_BEFORE_EDGE,
     REASON_LOST_IN_WINDOW,
+    REASON_OVERDUE_BEFORE_EDGE,
     REASON_STARTED_PAST_EDGE,
     REASON_WINDOW_GAP,
     STATUS_SCORED,
@@ -388,6 +389,27 @@ def test_unscored_when_the_track_is_lost_in_the_window_or_before_the_body_reache
     early = ShapeEvaluator(EDGE)
     early.update(contours[0], 0.0)
     assert early.finish().reason == REASON_LOST_BEFORE_EDGE
+
+
+def test_a_fillet_lost_in_its_window_is_overdue_once_its_centroid_is_past_the_edge_by_more_than_a_late_close():
+    contours = translating(80)
+    _, plain, _ = run_evaluator(contours)
+    opens, closes = round(plain.trace[0].stamp * FPS), round(plain.trace[-1].stamp * FPS)
+    evaluator = ShapeEvaluator(EDGE)
+    for i in range(opens + 2):
+        evaluator.update(contours[i], i / FPS)
+    assert evaluator.overdue((closes + 1) / FPS) is None  # a frame now could still close the window in time
+    result = evaluator.overdue((closes + 3) / FPS)
+    assert result.status == STATUS_UNSCORED and result.reason.startswith("no clean frame closed the evaluation window")
+    assert abs(result.stamp - plain.trace[-1].stamp) <= 1 / FPS  # stamped when its centroid was due at the edge
+    assert evaluator.update(contours[closes + 4], (closes + 4) / FPS) is None and evaluator.finish() is None
+
+    approaching = ShapeEvaluator(EDGE)  # lost on the belt, long before its reference was locked
+    for i in range(5):
+        approaching.update(contours[i], i / FPS)
+    assert approaching.overdue((closes + 3) / FPS).reason == REASON_OVERDUE_BEFORE_EDGE
+    assert ShapeEvaluator(EDGE).overdue(1.0) is None  # nothing seen: no speed, no position
+    assert run_evaluator(contours)[2].overdue(10.0) is None  # decided already
 
 
 def test_evaluator_options_are_validated():

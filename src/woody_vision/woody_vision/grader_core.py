@@ -32,6 +32,7 @@ from woody_vision.grading import LABEL_NORMAL, LABEL_UNSCORED, FilletConditions,
 from woody_vision.shape_score import (
     LEADING_BLUNT,
     REASON_LOST_BEFORE_EDGE,
+    REASON_OVERDUE_BEFORE_EDGE,
     REASON_STARTED_PAST_EDGE,
     STATUS_SCORED,
     STATUS_UNSCORED,
@@ -133,7 +134,7 @@ PIECE_AREA_RATIO = 0.5
 """A track first seen past the edge is a split-off piece of its lane's fillet when its blob is smaller than this
 fraction of that fillet's flat outline (:meth:`FilletGrader._is_piece`)."""
 
-PIECE_REASONS = (REASON_STARTED_PAST_EDGE, REASON_LOST_BEFORE_EDGE)
+PIECE_REASONS = (REASON_STARTED_PAST_EDGE, REASON_LOST_BEFORE_EDGE, REASON_OVERDUE_BEFORE_EDGE)
 """The unscored results :meth:`FilletGrader._is_piece` checks: a track only a piece of a fillet ends so."""
 
 JOINED_MARGIN_LN = 0.2
@@ -231,15 +232,26 @@ class FilletGrader:
                 result = self._take_over(track, stamp, result, neighbours)
             if result is not None:  # a finished evaluator stays until its track ends: one verdict per track
                 decided += self._decide(track.track_id, result, _area(track.contour))
+        for track in tracks:
+            evaluator = self._evaluators.get(track.track_id)
+            if evaluator is not None:
+                decided += self._conclude(track.track_id, evaluator, evaluator.overdue(stamp))
         for track_id in ended_ids:
             evaluator = self._evaluators.pop(track_id, None)
-            result = evaluator.finish() if evaluator is not None else None
-            if result is not None and evaluator.sightings < MIN_SIGHTINGS:
-                self.tentative += 1  # seen once or twice, then lost: a track the grader cannot stand behind
-            elif result is not None:
-                decided += self._decide(track_id, result, evaluator.flat_area)
+            if evaluator is not None:
+                decided += self._conclude(track_id, evaluator, evaluator.finish())
             self._lanes.pop(track_id, None)
         return decided
+
+    def _conclude(self, track_id: int, evaluator: ShapeEvaluator, result: ShapeResult | None) -> list[GradedFillet]:
+        """The verdict of a track that ended or whose fillet is overdue at the edge (``result``; None: no verdict
+        now). A track seen only once or twice gives none: the grader cannot stand behind it."""
+        if result is None:
+            return []
+        if evaluator.sightings < MIN_SIGHTINGS:
+            self.tentative += 1
+            return []
+        return self._decide(track_id, result, evaluator.flat_area)
 
     def frame_phi(self, track_id: int, stamp: float) -> float:
         """Φ_t of the track's frame at ``stamp`` (NaN when that frame was not scored): the overlays' label."""

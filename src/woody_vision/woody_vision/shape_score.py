@@ -88,7 +88,12 @@ flat frame and clipped from its own trailing edge.
 
 A result is produced exactly once per evaluator: 'scored' when the window
 closes, otherwise 'unscored' with a reason (no reference because the track
-started at or past the edge, or the track ended before the window closed).
+started at or past the edge, the track ended before the window closed, or the
+fillet is overdue: by its own speed its centroid lies further past the edge
+than a late frame may close the window, and no frame closed it). An overdue
+fillet is decided on the frame that shows it (:meth:`ShapeEvaluator.overdue`),
+not when the tracker gives its track up half a second later: the gate
+downstream still gets the verdict in time.
 """
 
 from __future__ import annotations
@@ -119,6 +124,10 @@ REASON_LOST_IN_WINDOW = "track ended before the evaluation window closed"
 REASON_DEGENERATE = "degenerate reference contour"
 REASON_LATE_CLOSE = "frames lost at the roller edge: the window closed {:.0f} px past the fillet's centroid"
 REASON_WINDOW_GAP = "phi absent: frames lost in the evaluation window ({:.3f} s without a frame of this fillet)"
+REASON_OVERDUE_BEFORE_EDGE = ("fillet not seen since before the roller edge, and by its speed its centroid is past "
+                              "it: unscored while the gate can still act")
+REASON_OVERDUE_IN_WINDOW = ("no clean frame closed the evaluation window, and by its speed the fillet's centroid is "
+                            "{:.0f} px past the roller edge: unscored while the gate can still act")
 REASON_LINE_GAP = ("no clean frames around the measuring point (overhang {:.2f} L): frames lost or merged with a "
                    "neighbour ({} rejected)")
 LINE_OVERHANG_FRACTION = 0.5
@@ -728,6 +737,27 @@ class ShapeEvaluator:
         (t0, r0), (t1, r1) = self._approach[-SPEED_FRAMES:][0], self._approach[-1]
         return (r1 - r0) / (t1 - t0) if t1 > t0 else math.nan
 
+    def overdue(self, stamp: float) -> ShapeResult | None:
+        """The unscored result once, by its own speed, this fillet's centroid lies further past the edge at
+        ``stamp`` than a late frame may close its window (``GAP_FRAMES`` frames of advance) and no frame closed
+        it: its track went unseen or only merged frames came. A frame arriving later would leave it unscored
+        anyway (REASON_LATE_CLOSE); deciding now, not when the track ends, gets the verdict to the gate in time.
+        The result is stamped with the moment the centroid was due at the edge. None while the window may
+        still close, once it has, or when the fillet's speed is unknown."""
+        if self._phase is _Phase.DONE or self._closed or self._last_trailing is None:
+            return None
+        reference = self._reference or (make_reference(self._flat[-1][0], self.tip_ratio) if self._flat else None)
+        if reference is None:
+            return None
+        speed = self._speed_px_s()
+        overshoot = self.predicted_trailing(stamp) + reference.centroid_offset_px - self.edge_row
+        if not (speed > 0.0 and overshoot > GAP_FRAMES * self._advance_per_frame()):  # False too on a NaN speed
+            return None
+        due = self._trailing_stamp + (self.edge_row - reference.centroid_offset_px - self._last_trailing) / speed
+        if self._reference is None:
+            return self._finish(STATUS_UNSCORED, REASON_OVERDUE_BEFORE_EDGE, stamp=due)
+        return self._finish(STATUS_UNSCORED, REASON_OVERDUE_IN_WINDOW.format(overshoot), stamp=due)
+
     def finish(self) -> ShapeResult | None:
         """The track ended: the unscored result, or None if a result was already produced."""
         if self._phase is _Phase.DONE:
@@ -751,7 +781,8 @@ class ShapeEvaluator:
         return FrameScore(stamp, self.w1 * hu_term + self.w2 * solidity_term, hu_term, solidity_term, overhang, joined)
 
     def _finish(self, status: str, reason: str, line_phi: float = math.nan,
-                line_contour: np.ndarray | None = None, line_stamp: float | None = None) -> ShapeResult:
+                line_contour: np.ndarray | None = None, line_stamp: float | None = None,
+                stamp: float | None = None) -> ShapeResult:
         self._phase = _Phase.DONE
         referenced = self._reference is not None
         complete = self._closed and not self._window_gap
@@ -763,7 +794,7 @@ class ShapeEvaluator:
             hu_term=_nanmax([f.hu_term for f in window]),
             solidity_term=_nanmax([f.solidity_term for f in window]),
             frames=len(self._trace),
-            stamp=self._last_stamp,
+            stamp=self._last_stamp if stamp is None else stamp,
             aspect_ratio=self._reference.aspect_ratio if referenced else math.nan,
             reference_stamp=self._reference_stamp if referenced else None,
             trace=tuple(self._trace),
