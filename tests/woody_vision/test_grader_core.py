@@ -9,6 +9,7 @@ import pytest
 
 from woody_vision.grader_core import (
     JOINED_MARGIN_LN,
+    JOINED_MERGED_FRAMES,
     REASON_NO_SIDE,
     SIDE_MATCH_SLACK_S,
     SIDE_SILENT_S,
@@ -206,6 +207,26 @@ def test_a_fillet_graded_normal_on_frames_split_from_a_neighbour_near_the_cut_is
     assert feed(FilletGrader(EDGE, GradingRules(threshold=near)), 1, 0, shapes)[0][1].label == "normal"
     far = alone.score / math.exp(2.0 * JOINED_MARGIN_LN)
     assert beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), shapes).label == "normal"
+
+
+def widened(contour: np.ndarray, factor: float = 1.5) -> np.ndarray:
+    """The outline a fillet merged with its side neighbour gives: too wide to be the fillet alone."""
+    out = contour.copy()
+    out[:, 0] = np.round(300 + (out[:, 0] - 300) * factor)
+    return out
+
+
+def test_a_fillet_graded_normal_on_frames_split_from_a_neighbour_after_a_merged_window_is_unscored():
+    shapes = contours(90, bend=0.4)
+    ((_, alone),) = feed(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 0, shapes)
+    far = alone.score / math.exp(2.0 * JOINED_MARGIN_LN)  # far below the score: no margin rule applies
+    opens = round(alone.shape.trace[0].stamp * FPS)
+    for merged, label in ((JOINED_MERGED_FRAMES - 1, "normal"), (JOINED_MERGED_FRAMES, "unscored")):
+        frames = [widened(c) if opens <= i < opens + merged else c for i, c in enumerate(shapes)]
+        verdict = beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), frames)
+        assert verdict.shape.rejected_frames == merged and verdict.label == label
+    assert verdict.reason.startswith(f"outline joined a neighbour's through its window ({merged} frames merged)")
+    assert feed(FilletGrader(EDGE, GradingRules(threshold=far)), 1, 0, frames)[0][1].label == "normal"  # not joined
 
 
 def test_a_sliver_lost_on_the_belt_beside_its_lane_fillet_gets_no_verdict_but_a_lost_fillet_does():

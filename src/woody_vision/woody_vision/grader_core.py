@@ -146,6 +146,16 @@ one such fillet in ten. Chosen on one set of live runs and checked on a disjoint
 REASON_JOINED = ("outline split from a neighbour's at the measuring point, score {:.2f} within {:.0%} of the cut "
                  "{:.2f}")
 
+JOINED_MERGED_FRAMES = 3
+"""A fillet graded normal on frames split from a neighbour's outline at the measuring point, in a window where at
+least this many frames (0.1 s at 30 Hz) were rejected as merged with a neighbour, is unscored whatever its score:
+it lay joined to the neighbour through much of its window, and the split hands pieces of the hanging parts to one
+or the other, so its score says little. Chosen on one set of live runs and checked on two disjoint ones
+(docs/results.md)."""
+
+REASON_JOINED_THROUGH = ("outline joined a neighbour's through its window ({} frames merged) and split from it at the "
+                         "measuring point")
+
 MIN_SIGHTINGS = 3
 """Frames a track must be seen in before its end gives a verdict."""
 
@@ -313,9 +323,9 @@ class FilletGrader:
             result = replace(result, status=STATUS_UNSCORED, reason="; ".join(r for r in (outside, result.reason) if r))
             return GradedFillet(track_id, lane, result, LABEL_UNSCORED, "", conditions=conditions)
         decision = self.rules.classify(score, conditions)
-        if not paper and decision.label == LABEL_NORMAL and _joined_near_cut(result, score, decision.threshold):
-            reason = REASON_JOINED.format(score, math.expm1(JOINED_MARGIN_LN), decision.threshold)
-            result = replace(result, status=STATUS_UNSCORED, reason="; ".join(r for r in (reason, result.reason) if r))
+        doubt = _joined_doubt(result, score, decision.threshold) if decision.label == LABEL_NORMAL and not paper else ""
+        if doubt:
+            result = replace(result, status=STATUS_UNSCORED, reason="; ".join(r for r in (doubt, result.reason) if r))
             return GradedFillet(track_id, lane, result, LABEL_UNSCORED, "", conditions=conditions)
         return GradedFillet(track_id, lane, result, decision.label, decision.grade or "", score=score,
                             conditions=conditions, threshold=decision.threshold)
@@ -359,9 +369,16 @@ class FilletGrader:
         return None
 
 
-def _joined_near_cut(result: ShapeResult, score: float, threshold: float) -> bool:
-    """Whether a score read on joined frames lies within JOINED_MARGIN_LN above the cut (see there)."""
-    return result.joined_at_line and math.log(score / threshold) < JOINED_MARGIN_LN
+def _joined_doubt(result: ShapeResult, score: float, threshold: float) -> str:
+    """Why a normal score read on frames split from a neighbour's outline cannot pass the fillet ('' when it can):
+    it lies within JOINED_MARGIN_LN above the cut, or the window was merged over JOINED_MERGED_FRAMES frames."""
+    if not result.joined_at_line:
+        return ""
+    if math.log(score / threshold) < JOINED_MARGIN_LN:
+        return REASON_JOINED.format(score, math.expm1(JOINED_MARGIN_LN), threshold)
+    if result.rejected_frames >= JOINED_MERGED_FRAMES:
+        return REASON_JOINED_THROUGH.format(result.rejected_frames)
+    return ""
 
 
 def _outline(contour: np.ndarray) -> np.ndarray:
