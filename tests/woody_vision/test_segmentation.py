@@ -276,7 +276,7 @@ def test_segmentation_params_are_validated():
     for bad in (dict(height_threshold_m=0.0), dict(min_area_px=0), dict(open_kernel_px=-1),
                 dict(split_solidity=1.5), dict(core_ratio=1.0), dict(height_core_floor=0.8),
                 dict(height_core_floor=0.0), dict(color_threshold=-1.0),
-                dict(color_search_px=-1)):
+                dict(color_search_px=-1), dict(split_length_px=-1.0)):
         with pytest.raises(ValueError):
             SegmentationParams(**bad)
 
@@ -423,6 +423,24 @@ def test_a_thin_fillet_touching_a_thick_one_side_by_side_is_split_below_the_firs
     assert len(segment_height_map(height, one_cut)) == 1, "the default cut finds the thick one's middle only"
     blobs = segment_height_map(height, SegmentationParams(split_width_px=80.0, height_core_floor=0.5))
     assert sorted(round(b.centroid[0] / 10) for b in blobs) == [9, 15]
+
+
+def test_two_fillets_touching_end_to_end_without_a_neck_are_split_by_height_when_too_long_for_one():
+    """A 17 mm fillet whose blunt end touches a 28 mm one's across its whole width: one solid blob with no neck, no
+    notch and no pixel of the thin one above 0.75 x the thick one's height. Longer along the flow than one fillet
+    can be, it is two, and the relief cut lower finds both middles; the same blob under that length stays whole."""
+    rows, cols = np.mgrid[0:240, 0:120]
+    height = np.zeros((240, 120), np.float32)
+    for centre, top in ((60.0, 0.017), (170.0, 0.028)):  # nearly rectangular: full width where they touch
+        across, along = (cols - 60.0) / 30.0, (rows - centre) / 56.0
+        inside = across ** 6 + along ** 6 < 1.0
+        dome = 0.003 + top * np.sqrt(np.clip(1.0 - along ** 2, 0, 1))
+        height = np.maximum(height, np.where(inside, dome, 0.0))
+    assert len(segment_height_map(height, SegmentationParams())) == 1, "precondition: one solid blob"
+    long = SegmentationParams(split_length_px=180.0)
+    blobs = segment_height_map(height, long)
+    assert sorted(round(b.centroid[1] / 10) for b in blobs) == [6, 17]
+    assert len(segment_height_map(height, SegmentationParams(split_length_px=240.0))) == 1
 
 
 def test_a_wide_fillet_reading_thicker_over_the_roller_crown_is_not_split_along_the_flow():

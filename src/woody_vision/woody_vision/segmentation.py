@@ -10,8 +10,10 @@ a lane or across lanes come apart. A component wider across the flow than
 one fillet can be (``split_width_px``) may be two fillets lying side by side
 along their whole length, solid as one and without notches: it is split by a
 watershed on the height map from its thick cores, since the touching rims are
-a few millimetres high and the fillets' middles centimetres. Blobs under
-``min_area_px`` are dropped.
+a few millimetres high and the fillets' middles centimetres. A component
+longer along the flow than one fillet can be (``split_length_px``) is two
+fillets touching end to end, split at their necks however solid it looks.
+Blobs under ``min_area_px`` are dropped.
 
 Everything per pixel is OpenCV/numpy; the Python loop runs over components
 (a handful per frame) and works on each component's bounding-box ROI.
@@ -89,6 +91,10 @@ class SegmentationParams:
     split_width_px: float = 0.0
     """Components wider than this across the flow (columns) are checked for fillets side by side by height
     (0 = off; the segmenter sets it from the camera and ``max_fillet_width_m``)."""
+    split_length_px: float = 0.0
+    """Components longer than this along the flow (rows) are two fillets touching end to end, however solid they
+    look, and are split at their necks like a non-convex one (0 = off; the segmenter sets it from the camera and
+    ``max_fillet_length_m``)."""
     fill_invalid_px: int = 0
     """Pixels without a depth measurement take the mean height of the valid ones within this radius (0 = off):
     a real camera's holes at a fillet's border would otherwise notch its contour."""
@@ -122,8 +128,9 @@ class SegmentationParams:
         if not (0.0 < self.core_ratio < 1.0 and 0.0 < self.height_core_floor <= self.height_core_ratio < 1.0):
             raise ValueError(f"core_ratio must be in (0, 1) and 0 < height_core_floor <= height_core_ratio < 1, got "
                              f"{self.core_ratio}, {self.height_core_floor}, {self.height_core_ratio}")
-        if not self.split_width_px >= 0.0:
-            raise ValueError(f"split_width_px must be >= 0, got {self.split_width_px}")
+        if not (self.split_width_px >= 0.0 and self.split_length_px >= 0.0):
+            raise ValueError(f"split_width_px and split_length_px must be >= 0, got {self.split_width_px}, "
+                             f"{self.split_length_px}")
         if self.color_threshold < 0 or self.color_search_px < 0:
             raise ValueError(f"color_threshold and color_search_px must be >= 0, got {self.color_threshold}, "
                              f"{self.color_search_px}")
@@ -338,7 +345,8 @@ def _split_component(component: np.ndarray, height: np.ndarray,
     hull_area = cv2.contourArea(cv2.convexHull(contour))
     solid = hull_area <= 0.0 or cv2.contourArea(contour) / hull_area >= params.split_solidity
     parts = (None if solid else _split_by_distance(component, contour, params)) or [(component, contour)]
-    return [piece for part in parts for piece in _split_if_wide(part, height, params)]
+    wide = [piece for part in parts for piece in _split_if_wide(part, height, params)]
+    return [piece for part in wide for piece in _split_if_long(part, height, params)]
 
 
 def _split_if_wide(part: tuple[np.ndarray, np.ndarray | None], height: np.ndarray,
@@ -348,6 +356,18 @@ def _split_if_wide(part: tuple[np.ndarray, np.ndarray | None], height: np.ndarra
     if not 0.0 < params.split_width_px < cv2.boundingRect(mask)[2]:
         return [part]
     return _split_by_height(mask, height, params) or [part]
+
+
+def _split_if_long(part: tuple[np.ndarray, np.ndarray | None], height: np.ndarray,
+                   params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """The part, or the fillets end to end in it when it is longer along the flow than one fillet can be: split
+    by height from its thick middles one behind the other (two fillets touching end to end leave no neck, but
+    each is thin at its ends), else at its necks."""
+    mask = part[0]
+    if not 0.0 < params.split_length_px < cv2.boundingRect(mask)[3]:
+        return [part]
+    contour = part[1] if part[1] is not None else _largest_contour(mask)
+    return _split_by_height(mask, height, params, along=True) or _split_by_distance(mask, contour, params) or [part]
 
 
 def _split_by_distance(component: np.ndarray, contour: np.ndarray,
@@ -365,31 +385,34 @@ def _split_by_distance(component: np.ndarray, contour: np.ndarray,
     return _region_masks(labels, range(1, n_cores))
 
 
-def _split_by_height(component: np.ndarray, height: np.ndarray,
-                     params: SegmentationParams) -> list[tuple[np.ndarray, None]] | None:
+def _split_by_height(component: np.ndarray, height: np.ndarray, params: SegmentationParams,
+                     along: bool = False) -> list[tuple[np.ndarray, None]] | None:
     """A wide component split into the fillets around its thick cores (height watershed), or None if it has one.
 
     Pixels higher than a fillet lying on the belt can be (past the roller edge the background is the floor) are
     left out of the relief: the cores are the middles of the fillets still on the belt. The cores are cut from
     the relief at ``height_core_ratio`` × its highest pixel first, then lower, down to ``height_core_floor``: a
-    thin fillet beside a thick one rises above a lower cut only.
+    thin fillet beside a thick one rises above a lower cut only. ``along``: the cores lie one behind the other
+    along the flow (a component too long for one fillet, so surely two), cut down to LONG_CORE_FLOOR.
     """
     relief = np.asarray(height, np.float32).copy()
     relief[(component == 0) | (relief > MAX_LYING_HEIGHT_M)] = 0.0
     top = float(relief.max())
-    for ratio in np.arange(params.height_core_ratio, params.height_core_floor - 1e-9, -CORE_RATIO_STEP):
-        markers, cores = _side_by_side_cores(cv2.compare(relief, float(ratio) * top, cv2.CMP_GT), params)
+    floor = LONG_CORE_FLOOR if along else params.height_core_floor
+    for ratio in np.arange(params.height_core_ratio, floor - 1e-9, -CORE_RATIO_STEP):
+        markers, cores = _fillet_cores(cv2.compare(relief, float(ratio) * top, cv2.CMP_GT), params, along)
         if len(cores) >= 2:
             labels = _flood(relief, np.where(np.isin(markers, cores), markers, 0).astype(np.int32), component)
             return _region_masks(labels, cores)
     return None
 
 
-def _side_by_side_cores(cores: np.ndarray, params: SegmentationParams) -> tuple[np.ndarray, list[int]]:
-    """The cores' labels and those large enough to be a fillet's middle that lie beside another such core."""
+def _fillet_cores(cores: np.ndarray, params: SegmentationParams, along: bool) -> tuple[np.ndarray, list[int]]:
+    """The cores' labels and those large enough to be a fillet's middle that lie beside another such core (one
+    behind another when ``along``)."""
     n_cores, markers, stats, _ = cv2.connectedComponentsWithStats(cores, connectivity=8, ltype=cv2.CV_32S)
     big = [c for c in range(1, n_cores) if stats[c, cv2.CC_STAT_AREA] * 8 >= params.min_area_px]
-    return markers, [c for c in big if any(_side_by_side(stats[c], stats[d]) for d in big if d != c)]
+    return markers, [c for c in big if any(_side_by_side(stats[c], stats[d]) != along for d in big if d != c)]
 
 
 def _split_by_priors(part: tuple[np.ndarray, np.ndarray | None], priors: Sequence[np.ndarray],
@@ -486,6 +509,10 @@ PRIOR_ERODE_PX = 5
 """The priors' pixels seed the split this far (kernel px) inside their outlines, off the contact."""
 SIDE_BY_SIDE_OVERLAP = 0.25
 """Two thick cores split a wide component only when they share this fraction of the shorter core's rows."""
+LONG_CORE_FLOOR = 0.35
+"""The lowest cut of a too-long component's relief (× its highest pixel): two fillets touching end to end are thin
+at their ends (a few mm where they meet, under a third of a thick fillet's middle), and the thinner one's middle
+may stand at half the thicker one's."""
 CORE_RATIO_STEP = 0.05
 """Step between the cuts of :func:`_split_by_height` (× the component's highest pixel)."""
 MAX_LYING_HEIGHT_M = 0.1

@@ -38,6 +38,7 @@ from woody_common.line import (
     LANE_PITCH_M,
     LANE_PITCH_RANGE_M,
     LANES,
+    MAX_FILLET_LENGTH_M,
     MAX_FILLET_WIDTH_M,
     MAX_LANES,
     TOP_CAMERA_HEIGHT_M,
@@ -75,6 +76,9 @@ class Segmenter(Node):
         self.max_fillet_width = declare(self, "max_fillet_width_m", MAX_FILLET_WIDTH_M, "A blob wider across the "
                                         "flow than this is checked for two fillets side by side (m; 0 = off).",
                                         0.0, 2.0)
+        self.max_fillet_length = declare(self, "max_fillet_length_m", MAX_FILLET_LENGTH_M, "A blob longer along the "
+                                         "flow than this is split into the fillets touching end to end in it (m; 0 = "
+                                         "off).", 0.0, 2.0)
         self.depth_unit = declare(self, "depth_unit_m", DEPTH_UNIT_M, "One step of a 16UC1 depth image (m; REP "
                                   "118: 0.001, millimetres).", 1e-5, 0.01)
         self.camera_height = declare(self, "camera_height_m", TOP_CAMERA_HEIGHT_M,
@@ -186,7 +190,8 @@ class Segmenter(Node):
             return
         height = self.belt_view.height_m
         layout = LaneLayout(tuple(info.k), height, self.lanes, self.lane_pitch)
-        self.params = dataclasses.replace(self.params, split_width_px=self.max_fillet_width * info.k[0] / height)
+        self.params = dataclasses.replace(self.params, split_width_px=self.max_fillet_width * info.k[0] / height,
+                                          split_length_px=self.max_fillet_length * info.k[4] / height)
         if self.tracker is None:
             self.tracker = CentroidTracker(lane_layout=layout, **self.tracker_options)
         else:  # tf_static came after the first camera_info: its mount from now on
