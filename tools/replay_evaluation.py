@@ -1,0 +1,102 @@
+"""Grade a `woody evaluate` folder's recorded runs again through the vision's modules, offline (docs/results.md).
+
+Each run's line.mcap holds the top camera's depth frames and the line's
+ground truth. They go frame by frame through what the segmenter and grader
+nodes run (segment_depth, CentroidTracker, belt_outline, FilletGrader) with
+the code as it is now, and the verdicts are matched to the fillets as
+`woody run` matches them. The physics is not run again, so a change to the
+vision is measured on the very frames the live grid saw, in about 4 s a run
+instead of 25; the live grid stays the figure the docs report. For the
+straight-down default camera `woody evaluate` uses; the roller edge row is
+the one the run's grader logged.
+
+    .venv/bin/python tools/replay_evaluation.py evaluate-out [--split-by-tracks]
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+from woody_bag.reader import read_bag
+from woody_bag.schemas import decode
+from woody_common import topics
+from woody_common.line import MAX_FILLET_LENGTH_M, MAX_FILLET_WIDTH_M
+from woody_common.stamps import stamp_to_seconds
+from woody_experiments.live_evaluation import RUNS_DIR, tally, woody_not_diverted
+from woody_experiments.messages import spawn_from_msg
+from woody_experiments.run_report import Verdict, join
+from woody_vision.camera_model import LaneLayout, belt_outline
+from woody_vision.grader_core import FilletGrader, GradedFillet, TrackObservation
+from woody_vision.image_encodings import depth_metres
+from woody_vision.segmentation import BackgroundModel, SegmentationParams, segment_depth
+from woody_vision.tracking import CentroidTracker
+
+EDGE_LINE = re.compile(r"roller edge at image row ([0-9.]+) \(camera_info K; camera height ([0-9.]+) m")
+
+
+def run_setup(run: Path) -> tuple[float, float, LaneLayout]:
+    """The run's roller edge row and camera height (from its grader's log) and its lane layout."""
+    match = EDGE_LINE.search((run / "logs" / "grader.log").read_text())
+    edge, height = float(match.group(1)), float(match.group(2))
+    params = (run / "logs" / "segmenter.params.yaml").read_text()
+    lanes = int(re.search(r"lanes: (\d+)", params).group(1))
+    pitch = float(re.search(r"lane_pitch_m: ([0-9.]+)", params).group(1))
+    info = next(iter(read_bag(run / "line.mcap", ["/" + topics.TOP_DEPTH_INFO])))
+    k = tuple(decode(info.type_name, info.data).k)
+    return edge, height, LaneLayout(k, height, lanes, pitch)
+
+
+def verdict_of(graded: GradedFillet) -> Verdict:
+    shape = graded.shape
+    return Verdict(fillet_id=graded.fillet_id, lane=graded.lane, stamp=shape.stamp, classification=graded.label,
+                   grade=graded.grade, phi=shape.phi, hu_term=shape.hu_term, solidity_term=shape.solidity_term,
+                   reason=shape.reason, threshold=graded.threshold, score=graded.score, line_phi=shape.line_phi,
+                   leading_end=shape.leading_end, rejected_frames=shape.rejected_frames)
+
+
+def replay_run(run: Path, split_by_tracks: bool) -> list[dict]:
+    """The run's rows (run_report.join) with its depth frames graded again."""
+    edge, height, layout = run_setup(run)
+    params = SegmentationParams(split_by_tracks=split_by_tracks,
+                                split_width_px=MAX_FILLET_WIDTH_M * layout.k[0] / height,
+                                split_length_px=MAX_FILLET_LENGTH_M * layout.k[4] / height)
+    background, tracker = BackgroundModel(5), CentroidTracker(lane_layout=layout)
+    grader = FilletGrader(edge, pixels_per_metre=layout.k[4] / height)
+    verdicts = []
+    for message in read_bag(run / "line.mcap", ["/" + topics.TOP_DEPTH_IMAGE]):
+        image = decode(message.type_name, message.data)
+        depth, stamp = depth_metres(image), stamp_to_seconds(image.header.stamp)
+        if not background.ready:
+            background.add(depth)
+            continue
+        blobs = segment_depth(depth, background.depth, params, priors=tracker.predicted_outlines(stamp))
+        update = tracker.update(blobs, stamp)
+        tracks = [TrackObservation(t.track_id, max(t.lane, 0), belt_outline(t.blob.contour, depth, layout.k, height),
+                                   t.unseen, t.blob.contour) for t in update.active]
+        verdicts += [verdict_of(g) for g in grader.on_tracks(stamp, tracks, [t.track_id for t in update.ended])]
+    truth = read_bag(run / "line.mcap", ["/" + topics.GROUND_TRUTH])
+    spawns = [spawn_from_msg(decode(m.type_name, m.data)) for m in truth]
+    return [{**row, "run": run.name} for row in join(spawns, verdicts)]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("folder", type=Path, help="a woody evaluate --out folder")
+    parser.add_argument("--split-by-tracks", action="store_true", help="the segmenter's split_by_tracks")
+    args = parser.parse_args()
+    rows = []
+    for run in sorted((args.folder / RUNS_DIR).iterdir()):
+        rows += replay_run(run, args.split_by_tracks)
+        print(f"  {run.name}", flush=True)
+    t = tally(rows)
+    print(f"{t.runs} runs, {t.fillets} fillets: right {t.right}, unscored {t.unscored}, missing {t.missing}, "
+          f"extra {t.extra}, woody not diverted {t.woody_not_diverted} of {t.woody}")
+    for row in woody_not_diverted(rows):
+        print(f"  woody not diverted: {row['run']} fillet {row['fillet_id']} lane {row['lane']} {row['mesh']} "
+              f"score {row['score']} cut {row['threshold']}")
+
+
+if __name__ == "__main__":
+    main()
