@@ -7,8 +7,8 @@ the code as it is now, and the verdicts are matched to the fillets as
 `woody run` matches them. The physics is not run again, so a change to the
 vision is measured on the very frames the live grid saw, in about 4 s a run
 instead of 25; the live grid stays the figure the docs report. For the
-straight-down default camera `woody evaluate` uses; the roller edge row is
-the one the run's grader logged.
+straight-down default camera and the grader's default roller edge, which
+`woody evaluate` uses.
 
     .venv/bin/python tools/replay_evaluation.py evaluate-out [--split-by-tracks]
 """
@@ -22,30 +22,42 @@ from pathlib import Path
 from woody_bag.reader import read_bag
 from woody_bag.schemas import decode
 from woody_common import topics
-from woody_common.line import MAX_FILLET_LENGTH_M, MAX_FILLET_WIDTH_M
+from woody_common.line import (
+    LANE_PITCH_M,
+    LANES,
+    MAX_FILLET_LENGTH_M,
+    MAX_FILLET_WIDTH_M,
+    TOP_CAMERA_HEIGHT_M,
+    TOP_EDGE_OFFSET_M,
+)
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.live_evaluation import RUNS_DIR, tally, woody_not_diverted
 from woody_experiments.messages import spawn_from_msg
 from woody_experiments.run_report import Verdict, join
-from woody_vision.camera_model import LaneLayout, belt_outline
+from woody_vision.camera_model import LaneLayout, belt_outline, edge_row
 from woody_vision.grader_core import FilletGrader, GradedFillet, TrackObservation
 from woody_vision.image_encodings import depth_metres
 from woody_vision.segmentation import BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.tracking import CentroidTracker
 
-EDGE_LINE = re.compile(r"roller edge at image row ([0-9.]+) \(camera_info K; camera height ([0-9.]+) m")
-
 
 def run_setup(run: Path) -> tuple[float, float, LaneLayout]:
-    """The run's roller edge row and camera height (from its grader's log) and its lane layout."""
-    match = EDGE_LINE.search((run / "logs" / "grader.log").read_text())
-    edge, height = float(match.group(1)), float(match.group(2))
-    params = (run / "logs" / "segmenter.params.yaml").read_text()
-    lanes = int(re.search(r"lanes: (\d+)", params).group(1))
-    pitch = float(re.search(r"lane_pitch_m: ([0-9.]+)", params).group(1))
+    """The run's roller edge row, camera height and lane layout: its camera_info's K with the line's defaults,
+    and the lanes, lane pitch and camera height its segmenter ran with when the run kept its logs (as every
+    `woody evaluate` run does)."""
     info = next(iter(read_bag(run / "line.mcap", ["/" + topics.TOP_DEPTH_INFO])))
     k = tuple(decode(info.type_name, info.data).k)
-    return edge, height, LaneLayout(k, height, lanes, pitch)
+    params = run / "logs" / "segmenter.params.yaml"
+    text = params.read_text() if params.exists() else ""
+    height = _parameter(text, "camera_height_m", TOP_CAMERA_HEIGHT_M)
+    lanes, pitch = int(_parameter(text, "lanes", LANES)), _parameter(text, "lane_pitch_m", LANE_PITCH_M)
+    layout = LaneLayout(k, height, lanes, pitch)
+    return edge_row(k, height, TOP_EDGE_OFFSET_M), height, layout
+
+
+def _parameter(params_yaml: str, name: str, default: float) -> float:
+    match = re.search(rf"\b{name}: ([0-9.]+)", params_yaml)
+    return float(match.group(1)) if match else default
 
 
 def verdict_of(graded: GradedFillet) -> Verdict:
