@@ -25,8 +25,6 @@ from woody_common import topics
 from woody_common.line import (
     LANE_PITCH_M,
     LANES,
-    MAX_FILLET_LENGTH_M,
-    MAX_FILLET_WIDTH_M,
     TOP_CAMERA_HEIGHT_M,
     TOP_EDGE_OFFSET_M,
 )
@@ -71,9 +69,7 @@ def verdict_of(graded: GradedFillet) -> Verdict:
 def replay_run(run: Path, split_by_tracks: bool) -> list[dict]:
     """The run's rows (run_report.join) with its depth frames graded again."""
     edge, height, layout = run_setup(run)
-    params = SegmentationParams(split_by_tracks=split_by_tracks,
-                                split_width_px=MAX_FILLET_WIDTH_M * layout.k[0] / height,
-                                split_length_px=MAX_FILLET_LENGTH_M * layout.k[4] / height)
+    params = SegmentationParams(split_by_tracks=split_by_tracks).for_camera(layout.k, height)
     background, tracker = BackgroundModel(5), CentroidTracker(lane_layout=layout)
     grader = FilletGrader(edge, pixels_per_metre=layout.k[4] / height)
     verdicts = []

@@ -21,6 +21,7 @@ Everything per pixel is OpenCV/numpy; the Python loop runs over components
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Sequence
@@ -30,6 +31,7 @@ import cv2
 import numba
 import numpy as np
 
+from woody_common.line import MAX_FILLET_LENGTH_M, MAX_FILLET_WIDTH_M
 from woody_vision.flood import flood
 
 DEFAULT_HEIGHT_THRESHOLD_M = 0.0005
@@ -115,6 +117,13 @@ class SegmentationParams:
     (:func:`_split_by_priors`). Off by default: on the live line it scores most fillets that merge with a
     neighbour at the edge (unscored 1.1 to 0.1 %), but the split boundary of two touching fillets is a few pixels
     off, and more woody fillets pass (13 against 9 of 1,152, docs/results.md)."""
+
+    def for_camera(self, k, camera_height_m: float, max_width_m: float = MAX_FILLET_WIDTH_M,
+                   max_length_m: float = MAX_FILLET_LENGTH_M) -> SegmentationParams:
+        """These parameters with ``split_width_px`` and ``split_length_px`` for a camera (row-major K) this high
+        over the belt: the widest and the longest a single fillet lies, in its pixels."""
+        return dataclasses.replace(self, split_width_px=max_width_m * k[0] / camera_height_m,
+                                   split_length_px=max_length_m * k[4] / camera_height_m)
 
     def __post_init__(self) -> None:
         if not self.height_threshold_m > 0.0:

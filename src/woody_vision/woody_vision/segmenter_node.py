@@ -20,7 +20,6 @@ dropped, with one log line, so a second pass is segmented like the first.
 from __future__ import annotations
 
 import array
-import dataclasses
 import sys
 
 import cv2
@@ -190,8 +189,7 @@ class Segmenter(Node):
             return
         height = self.belt_view.height_m
         layout = LaneLayout(tuple(info.k), height, self.lanes, self.lane_pitch)
-        self.params = dataclasses.replace(self.params, split_width_px=self.max_fillet_width * info.k[0] / height,
-                                          split_length_px=self.max_fillet_length * info.k[4] / height)
+        self.params = self.params.for_camera(info.k, height, self.max_fillet_width, self.max_fillet_length)
         if self.tracker is None:
             self.tracker = CentroidTracker(lane_layout=layout, **self.tracker_options)
         else:  # tf_static came after the first camera_info: its mount from now on

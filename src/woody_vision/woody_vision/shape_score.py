@@ -746,6 +746,8 @@ class ShapeEvaluator:
         still close, once it has, or when the fillet's speed is unknown."""
         if self._phase is _Phase.DONE or self._closed or self._last_trailing is None:
             return None
+        if self._reference is None and not self._front_past_edge(stamp):
+            return None  # the centroid lies behind the front: no outline to measure while the front is short of it
         reference = self._reference or (make_reference(self._flat[-1][0], self.tip_ratio) if self._flat else None)
         if reference is None:
             return None
@@ -757,6 +759,13 @@ class ShapeEvaluator:
         if self._reference is None:
             return self._finish(STATUS_UNSCORED, REASON_OVERDUE_BEFORE_EDGE, stamp=due)
         return self._finish(STATUS_UNSCORED, REASON_OVERDUE_IN_WINDOW.format(overshoot), stamp=due)
+
+    def _front_past_edge(self, stamp: float) -> bool:
+        """Whether the flat fillet's leading edge, moved at its own speed, lies past the edge at ``stamp``."""
+        if not self._approach:
+            return False
+        seen, leading = self._approach[-1]
+        return leading + self._speed_px_s() * (stamp - seen) > self.edge_row
 
     def finish(self) -> ShapeResult | None:
         """The track ended: the unscored result, or None if a result was already produced."""
