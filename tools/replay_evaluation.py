@@ -30,13 +30,14 @@ from woody_common.line import (
 )
 from woody_common.stamps import stamp_to_seconds
 from woody_experiments.live_evaluation import RUNS_DIR, tally, woody_not_diverted
-from woody_experiments.messages import spawn_from_msg
-from woody_experiments.run_report import Verdict, join
+from woody_experiments.messages import spawn_from_msg, verdict_from_msg
+from woody_experiments.run_report import join
 from woody_vision.camera_model import LaneLayout, belt_outline, edge_row
-from woody_vision.grader_core import FilletGrader, GradedFillet, TrackObservation
+from woody_vision.grader_core import FilletGrader, TrackObservation
 from woody_vision.image_encodings import depth_metres
 from woody_vision.segmentation import BackgroundModel, SegmentationParams, segment_depth
 from woody_vision.tracking import CentroidTracker
+from woody_vision.verdict_message import verdict_message
 
 
 def run_setup(run: Path) -> tuple[float, float, LaneLayout]:
@@ -58,14 +59,6 @@ def _parameter(params_yaml: str, name: str, default: float) -> float:
     return float(match.group(1)) if match else default
 
 
-def verdict_of(graded: GradedFillet) -> Verdict:
-    shape = graded.shape
-    return Verdict(fillet_id=graded.fillet_id, lane=graded.lane, stamp=shape.stamp, classification=graded.label,
-                   grade=graded.grade, phi=shape.phi, hu_term=shape.hu_term, solidity_term=shape.solidity_term,
-                   reason=shape.reason, threshold=graded.threshold, score=graded.score, line_phi=shape.line_phi,
-                   leading_end=shape.leading_end, rejected_frames=shape.rejected_frames)
-
-
 def replay_run(run: Path, split_by_tracks: bool) -> list[dict]:
     """The run's rows (run_report.join) with its depth frames graded again."""
     edge, height, layout = run_setup(run)
@@ -83,7 +76,8 @@ def replay_run(run: Path, split_by_tracks: bool) -> list[dict]:
         update = tracker.update(blobs, stamp)
         tracks = [TrackObservation(t.track_id, max(t.lane, 0), belt_outline(t.blob.contour, depth, layout.k, height),
                                    t.unseen, t.blob.contour) for t in update.active]
-        verdicts += [verdict_of(g) for g in grader.on_tracks(stamp, tracks, [t.track_id for t in update.ended])]
+        graded = grader.on_tracks(stamp, tracks, [t.track_id for t in update.ended])
+        verdicts += [verdict_from_msg(verdict_message(g, grader.rules, "", stamp)) for g in graded]
     truth = read_bag(run / "line.mcap", ["/" + topics.GROUND_TRUTH])
     spawns = [spawn_from_msg(decode(m.type_name, m.data)) for m in truth]
     return [{**row, "run": run.name} for row in join(spawns, verdicts)]

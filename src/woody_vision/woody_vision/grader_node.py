@@ -64,17 +64,14 @@ from woody_vision.grader_core import (
     TrackObservation,
     check_score,
 )
-from woody_vision.grading import THRESHOLD_RANGE, Cut, FilletConditions, FittedRange, GradingRules
+from woody_vision.grading import THRESHOLD_RANGE, Cut, FittedRange, GradingRules
 from woody_vision.image_encodings import color_rgb
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.mount_watch import MountWatch
 from woody_vision.overlays import FRAME, Overlay, outline, verdict_overlays
 from woody_vision.shape_score import LINE_OVERHANG_FRACTION, TIP_WIDTH_RATIO, W1, W2
 from woody_vision.side_view import SidePassageTracker
-
-LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOODY,
-          "unscored": FilletVerdict.CLASS_UNSCORED}
-
+from woody_vision.verdict_message import verdict_message
 
 SIDE_QUEUE_FRAMES = 60
 """Side frames queued for the grader (1 s of a 60 Hz camera, ~120 MB at most): a line running faster than real
@@ -279,7 +276,7 @@ class Grader(Node):
 
     def _publish(self, graded: list[GradedFillet]) -> None:
         for fillet in graded:
-            self.verdict_pub.publish(self.to_msg(fillet))
+            self.verdict_pub.publish(verdict_message(fillet, self.rules, self.frame_id, self.core.now))
             self.published += 1
             self.unscored += fillet.label == "unscored"
             self.labels[fillet.fillet_id] = fillet.label
@@ -300,36 +297,11 @@ class Grader(Node):
         msg.header.frame_id = self.side_frame_id
         return msg
 
-    def to_msg(self, fillet: GradedFillet) -> FilletVerdict:
-        shape, nan = fillet.shape, math.nan
-        conditions = fillet.conditions or FilletConditions(nan)
-        msg = FilletVerdict(
-            fillet_id=fillet.fillet_id, lane=max(fillet.lane, 0), classification=LABELS[fillet.label],
-            grade=fillet.grade, unscored_reason=fillet.reason, score=_finite_or_nan(fillet.score),
-            line_phi=_finite_or_nan(shape.line_phi), line_fraction=shape.line_fraction,
-            speed=_finite_or_nan(conditions.speed_mps), leading_end=shape.leading_end,
-            turn=_finite_or_nan(conditions.turn_deg), length=_finite_or_nan(conditions.length_m),
-            rejected_frames=shape.rejected_frames, phi=_finite_or_nan(shape.phi),
-            hu_term=_finite_or_nan(shape.hu_term), solidity_term=_finite_or_nan(shape.solidity_term),
-            threshold=self.rules.threshold.at(conditions), frames_in_window=shape.frames,
-            moderate_threshold=self.rules.threshold.at(conditions) if self.rules.severe_threshold
-            else nan, severe_threshold=self.rules.severe_threshold.at(conditions) if self.rules.severe_threshold
-            else nan)
-        msg.header.stamp = seconds_to_stamp(shape.stamp if shape.stamp is not None else self.core.now)
-        msg.header.frame_id = self.frame_id
-        if shape.reference_stamp is not None:
-            msg.reference_stamp = seconds_to_stamp(shape.reference_stamp)
-        return msg
-
     def close(self) -> None:
         pieces, taken = (self.core.fragments, self.core.taken_over) if self.core is not None else (0, 0)
         print(f"[grader] published {self.published} verdicts and {self.side_published} side results; {pieces} "
               f"tracks were pieces split off a fillet (no verdict); {taken} tracks carried on a fillet whose own "
               "track was lost at the edge", flush=True)
-
-
-def _finite_or_nan(value: float) -> float:
-    return float(value) if value is not None and math.isfinite(value) else math.nan
 
 
 def _outline_ok(flat) -> bool:
