@@ -187,10 +187,13 @@ def test_a_fillet_its_track_lost_at_the_edge_gets_one_verdict_from_the_track_tha
     assert verdict.fillet_id == 1 and verdict.scored and late.taken_over == 1
 
 
-def beside_a_neighbour(grader: FilletGrader, shapes) -> GradedFillet:
-    """Track 1's verdict when track 2's outline lies against its right side past the edge in every frame."""
+def beside_a_neighbour(grader: FilletGrader, shapes, lost: frozenset[int] = frozenset()) -> GradedFillet:
+    """Track 1's verdict when track 2's outline lies against its right side past the edge in every frame but the
+    ``lost`` ones (no frame came)."""
     out = []
     for i, contour in enumerate(shapes):
+        if i in lost:
+            continue
         neighbour = contour[(contour[:, 0] > 300) & (contour[:, 1] >= EDGE - 4)] + np.array([2, 0], np.int32)
         observed = [TrackObservation(1, 0, contour)] + ([TrackObservation(2, 1, neighbour)] if len(neighbour) else [])
         out += grader.on_tracks(i / FPS, observed)
@@ -225,8 +228,21 @@ def test_a_fillet_graded_normal_on_frames_split_from_a_neighbour_after_a_merged_
         frames = [widened(c) if opens <= i < opens + merged else c for i, c in enumerate(shapes)]
         verdict = beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), frames)
         assert verdict.shape.rejected_frames == merged and verdict.label == label
-    assert verdict.reason.startswith(f"outline joined a neighbour's through its window ({merged} frames merged)")
+    assert verdict.reason.startswith(f"outline joined a neighbour's through its window ({merged} frames merged, "
+                                     "0.000 s of frames lost)")
     assert feed(FilletGrader(EDGE, GradingRules(threshold=far)), 1, 0, frames)[0][1].label == "normal"  # not joined
+
+
+def test_a_fillet_graded_normal_on_frames_split_from_a_neighbour_in_a_window_with_frames_lost_is_unscored():
+    shapes = contours(90, bend=0.4)
+    ((_, alone),) = feed(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 0, shapes)
+    far = alone.score / math.exp(2.0 * JOINED_MARGIN_LN)  # far below the score: no margin rule applies
+    opens = round(alone.shape.trace[0].stamp * FPS)
+    lost = frozenset({opens + 1, opens + 2})
+    verdict = beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), shapes, lost)
+    assert verdict.label == "unscored" and verdict.shape.window_gap_s == pytest.approx(3 / FPS)
+    assert verdict.reason.startswith("outline joined a neighbour's through its window (0 frames merged, 0.100 s")
+    assert beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), shapes).label == "normal"
 
 
 def test_a_sliver_lost_on_the_belt_beside_its_lane_fillet_gets_no_verdict_but_a_lost_fillet_does():

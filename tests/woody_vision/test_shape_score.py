@@ -42,7 +42,7 @@ from woody_vision.shape_score import (
     rising_envelope,
     shape_terms,
     solidity,
-    touches_past,
+    touches,
     turn_deg,
 )
 from woody_vision.synthetic import DEFAULT_TOP_K, TopFillet, TopScene, teardrop_polygon
@@ -525,12 +525,13 @@ def hugging(contour: np.ndarray, first_row: float) -> np.ndarray:
     return side + np.array([2, 0], np.int32)
 
 
-def test_touching_is_a_shared_boundary_past_the_given_row():
+def test_touching_is_a_shared_boundary_of_enough_points():
     fillet = translating(1, start_lead_v=EDGE + 60.0)[0]
-    assert touches_past(fillet, [hugging(fillet, EDGE)], EDGE)
-    assert not touches_past(fillet, [hugging(fillet, EDGE) + np.array([3, 0], np.int32)], EDGE)  # a gap between
-    assert not touches_past(fillet, [hugging(fillet, EDGE)], EDGE + 50.0)  # they touch before that row only
-    assert not touches_past(fillet, [], EDGE)
+    assert touches(fillet, [hugging(fillet, EDGE)])
+    assert touches(fillet, [hugging(fillet, EDGE - 60.0)])  # on the belt as over the roller
+    assert not touches(fillet, [hugging(fillet, EDGE) + np.array([3, 0], np.int32)])  # a gap between
+    assert not touches(fillet, [hugging(fillet, EDGE)[:3]])  # a corner, not a shared boundary
+    assert not touches(fillet, [])
 
 
 def test_frames_split_from_a_neighbour_at_the_measuring_point_are_scored_and_marked():

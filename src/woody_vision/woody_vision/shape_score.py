@@ -71,9 +71,9 @@ another fillet's blob (a track that switched fillets after a merge); one that
 reaches beyond the reference's columns or length by more than ``SPILL_RATIO``
 holds another fillet's outline (on the belt plane a fillet bending over the
 roller only shortens along the flow). Each is rejected, never scored, and
-counted. A frame whose outline touches another fillet's past the bend's start
-is scored and marked joined (``JOIN_MIN_POINTS``): the split between them
-there is a guess, and the grader decides what such a score may decide. If the frames left around the
+counted. A frame whose outline touches another fillet's is scored and marked
+joined (``JOIN_MIN_POINTS``): the split between them is a guess, and the
+grader decides what such a score may decide. If the frames left around the
 measuring point are too far apart, the point is read on the line through the two clean frames nearest it on
 one side (:func:`extrapolate_at`) when the nearer lies within a frame's advance of it; else the fillet is
 unscored with the reason. The reference is likewise the latest
@@ -160,10 +160,11 @@ a fillet bending over the roller only shortens along the flow, and keeps its col
 JOIN_PX = 2
 """Outline points this close (px, along rows or columns) to another fillet's outline touch it."""
 JOIN_MIN_POINTS = 20
-"""A window frame whose outline touches another fillet's over this many points past the bend's start was split
-from the two fillets' joined blob there (:func:`touches_past`): where the split falls in the part hanging over
-the roller is a guess, so its Φ_t may hold a piece of the neighbour or miss a piece of its own. The frame is
-scored and marked (``FrameScore.joined``); the grader decides what a score read on such frames may decide."""
+"""A window frame whose outline touches another fillet's over this many points was split from the two fillets'
+joined blob (:func:`touches`): where the split falls is a guess, on the belt as in the part hanging over the
+roller, and Φ_t measures the whole outline, so it may hold a piece of the neighbour or miss a piece of its own.
+The frame is scored and marked (``FrameScore.joined``); the grader decides what a score read on such frames may
+decide."""
 JOIN_SPAN = 0.15
 """A line score is read on joined frames when a frame within this much overhang (× L) of the measuring point was
 joined (``ShapeResult.joined_at_line``)."""
@@ -292,7 +293,7 @@ class FrameScore:
     overhang: float = math.nan
     """Rigid overhang (trailing edge + L − edge) as a fraction of the body length L."""
     joined: bool = False
-    """The outline touched another fillet's past the bend's start (JOIN_MIN_POINTS)."""
+    """The outline touched another fillet's (JOIN_MIN_POINTS)."""
 
 
 @dataclass(frozen=True)
@@ -347,6 +348,8 @@ class ShapeResult:
     """Frames scored after the window closed, up to the measuring point."""
     window_closed: bool = False
     """Whether the paper's window closed cleanly and without a gap, so that ``phi`` is the paper's Φ."""
+    window_gap_s: float = 0.0
+    """The longest step into a window frame that lost frames before it (s; 0 when none was lost)."""
 
     @property
     def joined_at_line(self) -> bool:
@@ -375,18 +378,16 @@ def flat_overlap(reference: np.ndarray, current: np.ndarray, shift_rows: int, la
     return float(np.logical_and(*canvas).sum() / np.logical_or(*canvas).sum())
 
 
-def touches_past(outline: np.ndarray, others: Sequence[np.ndarray], first_row: float) -> bool:
-    """Whether ``outline``'s points at rows from ``first_row`` on touch one of ``others`` (JOIN_PX) at
-    JOIN_MIN_POINTS points or more."""
-    part = outline[outline[:, 1] >= first_row]
-    if len(part) < JOIN_MIN_POINTS:
+def touches(outline: np.ndarray, others: Sequence[np.ndarray]) -> bool:
+    """Whether ``outline`` touches one of ``others`` (JOIN_PX) at JOIN_MIN_POINTS points or more."""
+    if len(outline) < JOIN_MIN_POINTS:
         return False
-    low, high = part.min(axis=0) - JOIN_PX, part.max(axis=0) + JOIN_PX
+    low, high = outline.min(axis=0) - JOIN_PX, outline.max(axis=0) + JOIN_PX
     for other in others:
         near = other[np.all((other >= low) & (other <= high), axis=1)]
         if len(near) == 0:
             continue
-        distance = np.abs(part[:, None, :] - near[None, :, :]).max(axis=2).min(axis=1)
+        distance = np.abs(outline[:, None, :] - near[None, :, :]).max(axis=2).min(axis=1)
         if np.count_nonzero(distance <= JOIN_PX) >= JOIN_MIN_POINTS:
             return True
     return False
@@ -639,7 +640,7 @@ class ShapeEvaluator:
         if not self._closed:
             self._note_gap()
         overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
-        joined = touches_past(points, neighbours, self.edge_row - FLAT_MARGIN_PX)
+        joined = touches(points, neighbours)
         frame = self._score(self._reference, clip_body(points, trailing, reference.length_px), stamp, overhang, joined)
         (self._extra if self._closed else self._trace).append(frame)
         self._contours.append(points)
@@ -820,6 +821,7 @@ class ShapeEvaluator:
             line_stamp=line_stamp,
             extra_trace=tuple(self._extra),
             window_closed=complete,
+            window_gap_s=self._window_gap,
         )
 
 
