@@ -187,6 +187,30 @@ def test_a_fillet_its_track_lost_at_the_edge_gets_one_verdict_from_the_track_tha
     assert verdict.fillet_id == 1 and verdict.scored and late.taken_over == 1
 
 
+def test_a_fillet_whose_track_went_on_with_its_lane_mate_gets_one_verdict_from_the_track_that_found_it_again():
+    """Crowded lane: track 1 follows a fillet flat and track 3 its lane-mate ahead; as the lane-mate reaches the
+    edge, track 1 takes its blob (track 3 no longer sees it) and the fillet, still flat, opens track 2. Track 2
+    carries the fillet's evaluation and track 1 the lane-mate's: one verdict each, the ones they get alone."""
+    shapes = contours(120, start_tip_v=20.0, bend=0.4)
+    ((_, plain),) = feed(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 0, shapes, end=True)
+    ahead = contours(120, start_tip_v=140.0, bend=0.4)  # the lane-mate, just over a fillet length ahead
+    switch = next(i for i, c in enumerate(ahead) if c[:, 1].max() >= EDGE + 10)  # the fillet itself is flat there
+    assert shapes[switch][:, 1].max() < EDGE - 50
+    grader, out = FilletGrader(EDGE, GradingRules(threshold=1.0)), []
+    for i, (contour, mate) in enumerate(zip(shapes, ahead)):
+        if i < switch:
+            observed = [TrackObservation(1, 0, contour), TrackObservation(3, 0, mate)]
+        else:
+            observed = [TrackObservation(1, 0, mate), TrackObservation(2, 0, contour),
+                        TrackObservation(3, 0, ahead[switch - 1], unseen=i - switch + 1)]
+        out += grader.on_tracks(i / FPS, observed)
+    out += grader.on_tracks(len(shapes) / FPS, [], ended_ids=[1, 2, 3])
+    fillet, lane_mate = (v for v in out if v.fillet_id == 2), (v for v in out if v.fillet_id == 1)
+    assert len(out) == 2 and grader.taken_over == 2
+    for (verdict,) in (fillet, lane_mate):
+        assert verdict.scored and verdict.shape.line_phi == pytest.approx(plain.shape.line_phi)
+
+
 def beside_a_neighbour(grader: FilletGrader, shapes, lost: frozenset[int] = frozenset()) -> GradedFillet:
     """Track 1's verdict when track 2's outline lies against its right side past the edge in every frame but the
     ``lost`` ones (no frame came)."""

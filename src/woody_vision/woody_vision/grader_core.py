@@ -195,8 +195,8 @@ class FilletGrader:
         self.fragments = 0
         """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_is_piece`)."""
         self.taken_over = 0
-        """Tracks that started past the edge where a lane-mate's fillet should be, and carried on its evaluation
-        (see :meth:`_take_over`)."""
+        """Tracks that started where a lane-mate's fillet should be, and carried on its evaluation (see
+        :meth:`_adopted` and :meth:`_take_over`)."""
         self.tentative = 0
         """Tracks that ended after fewer than MIN_SIGHTINGS frames (a fillet's first sightings at the image border
         before a burst of lost frames, noise): no verdict, like a tentative track in SORT-style trackers."""
@@ -229,13 +229,14 @@ class FilletGrader:
         self.now = max(self.now, stamp)
         decided: list[GradedFillet] = []
         outlines = {track.track_id: _outline(track.contour) for track in tracks if not track.unseen}
-        for track in tracks:
+        for track in sorted(tracks, key=lambda t: t.track_id not in self._evaluators):  # new tracks last
             self._lanes[track.track_id] = track.lane
             if track.unseen:
                 continue
             evaluator = self._evaluators.get(track.track_id)
             if evaluator is None:
-                evaluator = self._evaluators[track.track_id] = ShapeEvaluator(self.edge_row, **self.evaluator_options)
+                evaluator = self._evaluators[track.track_id] = (self._adopted(track, stamp) or ShapeEvaluator(
+                    self.edge_row, **self.evaluator_options))
             neighbours = [outline for other, outline in outlines.items() if other != track.track_id]
             result = evaluator.update(track.contour, stamp, track.image_contour, neighbours)
             if result is not None and result.reason == REASON_STARTED_PAST_EDGE:
@@ -329,6 +330,21 @@ class FilletGrader:
             return GradedFillet(track_id, lane, result, LABEL_UNSCORED, "", conditions=conditions)
         return GradedFillet(track_id, lane, result, decision.label, decision.grade or "", score=score,
                             conditions=conditions, threshold=decision.threshold)
+
+    def _adopted(self, track: TrackObservation, stamp: float) -> ShapeEvaluator | None:
+        """The evaluation a new track carries on: that of a fillet of its lane whose own track lost it in this
+        frame (the frame was rejected, or the track not seen; the known tracks are fed first) and whose trailing
+        edge should lie where the new track's does. In a crowded lane a track can follow its lane-mate's blob
+        after the two merged, and the fillet it lost opens a new track: without this, both tracks give a
+        verdict. The track that lost it goes on without an evaluation and gives none."""
+        trailing = float(_outline(track.contour)[:, 1].min())
+        owner = next((other for other, evaluator in self._evaluators.items()
+                      if self._lanes.get(other) == track.lane and evaluator.lost_at(stamp)
+                      and evaluator.continues_at(trailing, stamp)), None)
+        if owner is None:
+            return None
+        self.taken_over += 1
+        return self._evaluators.pop(owner)
 
     def _take_over(self, track: TrackObservation, stamp: float, started_past: ShapeResult,
                    neighbours: list[np.ndarray]) -> ShapeResult | None:
