@@ -195,8 +195,8 @@ class FilletGrader:
         self.fragments = 0
         """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_is_piece`)."""
         self.taken_over = 0
-        """Tracks that started where a lane-mate's fillet should be, and carried on its evaluation (see
-        :meth:`_adopted` and :meth:`_take_over`)."""
+        """Tracks that started where a lane-mate's fillet, lost by its own track, should be, and carried on its
+        evaluation (see :meth:`_adopted`)."""
         self.tentative = 0
         """Tracks that ended after fewer than MIN_SIGHTINGS frames (a fillet's first sightings at the image border
         before a burst of lost frames, noise): no verdict, like a tentative track in SORT-style trackers."""
@@ -217,6 +217,8 @@ class FilletGrader:
     def _forget(self) -> None:
         self._evaluators: dict[int, ShapeEvaluator] = {}
         self._lanes: dict[int, int] = {}
+        self._bereft: set[int] = set()
+        """Tracks whose fillet's evaluation another track carries on (:meth:`_adopted`)."""
         self._pending: list[_Pending] = []
         self._side: list[SideMeasurement] = []
         self.now = -math.inf
@@ -239,8 +241,6 @@ class FilletGrader:
                     self.edge_row, **self.evaluator_options))
             neighbours = [outline for other, outline in outlines.items() if other != track.track_id]
             result = evaluator.update(track.contour, stamp, track.image_contour, neighbours)
-            if result is not None and result.reason == REASON_STARTED_PAST_EDGE:
-                result = self._take_over(track, stamp, result, neighbours)
             if result is not None:  # a finished evaluator stays until its track ends: one verdict per track
                 decided += self._decide(track.track_id, result, _area(track.contour))
         for track in tracks:
@@ -252,6 +252,7 @@ class FilletGrader:
             if evaluator is not None:
                 decided += self._conclude(track_id, evaluator, evaluator.finish())
             self._lanes.pop(track_id, None)
+            self._bereft.discard(track_id)
         return decided
 
     def _conclude(self, track_id: int, evaluator: ShapeEvaluator, result: ShapeResult | None) -> list[GradedFillet]:
@@ -301,7 +302,8 @@ class FilletGrader:
 
     def _decide(self, track_id: int, result: ShapeResult, area_px: float = 0.0) -> list[GradedFillet]:
         lane = self._lanes.get(track_id, -1)
-        if result.reason in PIECE_REASONS and self._is_piece(lane, track_id, area_px):
+        bereft = track_id in self._bereft and result.reason == REASON_STARTED_PAST_EDGE
+        if bereft or (result.reason in PIECE_REASONS and self._is_piece(lane, track_id, area_px)):
             self.fragments += 1
             return []
         graded = self._classify(track_id, lane, result)
@@ -334,33 +336,22 @@ class FilletGrader:
     def _adopted(self, track: TrackObservation, stamp: float) -> ShapeEvaluator | None:
         """The evaluation a new track carries on: that of a fillet of its lane whose own track lost it in this
         frame (the frame was rejected, or the track not seen; the known tracks are fed first) and whose trailing
-        edge should lie where the new track's does. In a crowded lane a track can follow its lane-mate's blob
-        after the two merged, and the fillet it lost opens a new track: without this, both tracks give a
-        verdict. The track that lost it goes on without an evaluation and gives none."""
-        trailing = float(_outline(track.contour)[:, 1].min())
-        owner = next((other for other, evaluator in self._evaluators.items()
-                      if self._lanes.get(other) == track.lane and evaluator.lost_at(stamp)
-                      and evaluator.continues_at(trailing, stamp)), None)
-        if owner is None:
-            return None
-        self.taken_over += 1
-        return self._evaluators.pop(owner)
-
-    def _take_over(self, track: TrackObservation, stamp: float, started_past: ShapeResult,
-                   neighbours: list[np.ndarray]) -> ShapeResult | None:
-        """A track that starts past the edge with its trailing edge where a referenced fillet of its lane should
-        have it now is that fillet, which its own track lost as it tipped (it took a piece split off at the edge,
-        or went unseen): the new track carries on that fillet's evaluation, so the fillet gets its one verdict
-        (none more if it already had it). Else the new track's own result, ``started_past``."""
+        edge should lie where the new track's does (TRAILING_LEAP_RATIO), so the fillet gets its one verdict
+        (none more if it already had it). Its track lost it as it tipped (it took a piece split off at the edge,
+        or went unseen), or, in a crowded lane, went on with the blob of the lane-mate hanging ahead after the
+        two merged; the fillet's outline then opens a new track, past the edge or before it. The track that
+        lost it gives no verdict for what it follows past the edge without a reference (:meth:`_decide`): a
+        piece, or its lane-mate, whose evaluation it carries on by this same rule when that one's track lost
+        it."""
         trailing = float(_outline(track.contour)[:, 1].min())
         owner = next((other for other, evaluator in self._evaluators.items()
                       if other != track.track_id and self._lanes.get(other) == track.lane
-                      and evaluator.continues_at(trailing, stamp)), None)
+                      and evaluator.lost_at(stamp) and evaluator.continues_at(trailing, stamp)), None)
         if owner is None:
-            return started_past
-        evaluator = self._evaluators[track.track_id] = self._evaluators.pop(owner)
+            return None
         self.taken_over += 1
-        return evaluator.update(track.contour, stamp, track.image_contour, neighbours)
+        self._bereft.add(owner)
+        return self._evaluators.pop(owner)
 
     def _is_piece(self, lane: int, track_id: int, area_px: float) -> bool:
         """Whether a track that first appears past the edge, or ends before its body reaches it, is a piece of a

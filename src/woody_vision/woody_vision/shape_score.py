@@ -682,9 +682,9 @@ class ShapeEvaluator:
         return self.referenced and abs(trailing - self.predicted_trailing(stamp)) <= self._leap_px()
 
     def lost_at(self, stamp: float) -> bool:
-        """Whether this referenced fillet, still being evaluated, was not seen clean at ``stamp``: its track's
-        frame then was rejected, or its track was not seen."""
-        return self.referenced and not self.done and self._trailing_stamp < stamp
+        """Whether this referenced fillet was not seen clean at ``stamp``: its track's frame then was rejected,
+        its track was not seen, or its result is out (it is followed no more)."""
+        return self.referenced and self._trailing_stamp < stamp
 
     def _leap_px(self) -> float:
         return TRAILING_LEAP_RATIO * self._reference.length_px
