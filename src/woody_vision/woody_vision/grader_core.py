@@ -193,7 +193,8 @@ class FilletGrader:
         ShapeEvaluator(self.edge_row, **self.evaluator_options)  # validate options now
         self._forget()
         self.fragments = 0
-        """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_is_piece`)."""
+        """Tracks dropped as split-off pieces of a fillet already being graded (see :meth:`_is_piece`), or as what a
+        track that lost its fillet to another followed past the edge (see :meth:`_adopted`)."""
         self.taken_over = 0
         """Tracks that started where a lane-mate's fillet, lost by its own track, should be, and carried on its
         evaluation (see :meth:`_adopted`)."""

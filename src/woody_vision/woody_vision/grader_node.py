@@ -300,8 +300,8 @@ class Grader(Node):
     def close(self) -> None:
         pieces, taken = (self.core.fragments, self.core.taken_over) if self.core is not None else (0, 0)
         print(f"[grader] published {self.published} verdicts and {self.side_published} side results; {pieces} "
-              f"tracks were pieces split off a fillet (no verdict); {taken} tracks carried on a fillet whose own "
-              "track was lost at the edge", flush=True)
+              f"tracks were pieces split off a fillet (no verdict); {taken} tracks carried on a fillet its own "
+              "track had lost", flush=True)
 
 
 def _outline_ok(flat) -> bool:
