@@ -24,12 +24,12 @@ def verdict_message(fillet: GradedFillet, rules: GradingRules, frame_id: str, no
     cut = rules.threshold.at(conditions)
     msg = FilletVerdict(
         fillet_id=fillet.fillet_id, lane=max(fillet.lane, 0), classification=LABELS[fillet.label],
-        grade=fillet.grade, unscored_reason=fillet.reason, score=finite_or_nan(fillet.score),
-        line_phi=finite_or_nan(shape.line_phi), line_fraction=shape.line_fraction,
-        speed=finite_or_nan(conditions.speed_mps), leading_end=shape.leading_end,
-        turn=finite_or_nan(conditions.turn_deg), length=finite_or_nan(conditions.length_m),
-        rejected_frames=shape.rejected_frames, phi=finite_or_nan(shape.phi),
-        hu_term=finite_or_nan(shape.hu_term), solidity_term=finite_or_nan(shape.solidity_term),
+        grade=fillet.grade, unscored_reason=fillet.reason, score=_finite_or_nan(fillet.score),
+        line_phi=_finite_or_nan(shape.line_phi), line_fraction=shape.line_fraction,
+        speed=_finite_or_nan(conditions.speed_mps), leading_end=shape.leading_end,
+        turn=_finite_or_nan(conditions.turn_deg), length=_finite_or_nan(conditions.length_m),
+        rejected_frames=shape.rejected_frames, phi=_finite_or_nan(shape.phi),
+        hu_term=_finite_or_nan(shape.hu_term), solidity_term=_finite_or_nan(shape.solidity_term),
         threshold=cut, frames_in_window=shape.frames,
         moderate_threshold=cut if rules.severe_threshold else nan,
         severe_threshold=rules.severe_threshold.at(conditions) if rules.severe_threshold else nan)
@@ -40,6 +40,6 @@ def verdict_message(fillet: GradedFillet, rules: GradingRules, frame_id: str, no
     return msg
 
 
-def finite_or_nan(value: float | None) -> float:
+def _finite_or_nan(value: float | None) -> float:
     """A float field's value: NaN for a value the fillet does not have."""
     return float(value) if value is not None and math.isfinite(value) else math.nan
