@@ -79,3 +79,27 @@ def test_yaw_sd_turns_every_run_of_every_step_and_is_recorded(tmp_path, monkeypa
     provenance = calibrate._provenance(args, {}, kept)  # --skip-physics keeps the physics fit's record, not the rest
     assert provenance["yaw_sd_deg"] == 13.0 and provenance["fit_meshes"] == "generated-90000"
     assert provenance["achieved_objective"] == 0.02 and provenance["date"] != "old"
+
+
+def test_the_threshold_and_line_cuts_are_fitted_through_the_top_camera_and_lanes_asked_for(tmp_path, monkeypatch):
+    planned = []
+
+    def capture(runs, *_):  # the threshold's calibration and held-out sets, then the line cuts' calibration set
+        planned.append(list(runs))
+        if len(planned) == 3:
+            raise _Planned
+        return [{"mesh": r.mesh, "k": r.k, "speed_fpm": r.speed_fpm, "lane": lane, "status": "scored",
+                 "phi": 20.0 if r.k == 0.0 else 4.0} for r in runs for lane in range(r.lanes)]
+
+    monkeypatch.setattr(calibrate, "_evaluate", capture)
+    camera = "config/cameras/paper.yaml"
+    args = build_parser("calibrate").parse_args(
+        ["calibrate", "--meshes", "generated:2:9", "--test-meshes", "generated:2:8", "--skip-physics", "--dry-run",
+         "--top-camera", camera, "--lanes", "3", "--out", str(tmp_path)])
+    with pytest.raises(_Planned):
+        calibrate.calibrate(args, None)
+    threshold, held_out, line = planned
+    assert {r.top_camera for runs in planned for r in runs} == {camera}
+    assert {r.lanes for r in line} == {3} and {r.lanes for r in threshold + held_out} == {3}
+    provenance = calibrate._provenance(args, {}, {})
+    assert (provenance["top_camera"], provenance["lanes"]) == ("paper", 3)

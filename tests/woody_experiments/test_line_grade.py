@@ -54,6 +54,12 @@ def test_a_fitted_cut_follows_speed_and_leading_end_between_the_classes():
     assert summary.confusion[("moderate", "moderate")] == sum(r.label == "woody" for r in moderate) > 0
 
 
+def test_a_score_of_zero_is_left_out_of_its_class_line():
+    rows = synthetic_rows(np.random.default_rng(3))
+    with_zero = rows + [row(100.0, 0.0, mesh="flat")]  # a line read back to the axis: below every cut
+    assert line_grade.fit_rules(with_zero).threshold == line_grade.fit_rules(rows).threshold
+
+
 def test_a_cut_needs_rows_on_both_sides():
     with pytest.raises(ValueError, match="at least 4 scored rows"):
         line_grade.fit_cut([row(0, 16.0)] * 3, [row(100, 2.0)] * 10)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+from woody_common.calibration import resolved_calibration
 from woody_experiments.run_report import (
     CALIBRATED_SPEEDS,
     GATE_MISSED_REASON,
@@ -20,6 +21,7 @@ from woody_experiments.run_report import (
     gate_timing_line,
     grade_confusion,
     join,
+    other_camera_note,
     read_csv,
     uncalibrated_speed_note,
     verdict_table,
@@ -145,6 +147,15 @@ def test_a_fillet_to_divert_without_a_gate_command_counts_as_not_diverted(tmp_pa
     assert f"- not diverted, {GATE_MISSED_REASON}: fillets 11" in text and "11 (woody, 3, late at the gate)" in text
     unknown = join(spawns, verdicts)  # no gate data (a verdict table alone): the verdict decides
     assert {r["gate_command"] for r in unknown} == {""} and accuracy(unknown).woody_diverted == 3
+
+
+def test_a_top_camera_other_than_the_calibrated_one_is_noted():
+    assert other_camera_note("default", "default") is None
+    assert other_camera_note("/etc/woody/cameras/paper.yaml", "paper") is None  # a camera file by its name
+    note = other_camera_note("config/cameras/realsense-d435.yaml", "default")
+    assert note.startswith("the calibration's cuts were fitted on the 'default' top camera, not this run's "
+                           "'realsense-d435'")
+    assert resolved_calibration().top_camera == "default"  # the installed calibration does not name one
 
 
 def test_a_line_speed_outside_the_calibrated_ones_is_noted_in_the_report(tmp_path):

@@ -59,6 +59,10 @@ def _woody(*args: str) -> subprocess.CompletedProcess:
     (("calibrate", "--masses", "10,0"), "argument --masses: every value must be a positive number, got 0"),
     (("calibrate", "--meshes", "/no/such/meshes", "--skip-physics", "--dry-run", "--jobs", "1"),
      "woody calibrate: mesh spec '/no/such/meshes': not 'builtin', 'generated:N[:SEED]', a folder or a mesh file"),
+    (("calibrate", "--top-camera", "fisheye", "--skip-physics", "--dry-run", "--jobs", "1"),
+     "woody calibrate: --top-camera: unknown top camera preset 'fisheye'; known: default, paper, or a camera "
+     "description file (*.yaml)"),
+    (("calibrate", "--lanes", "7"), "argument --lanes: invalid choice: 7 (choose from 1, 2, 3, 4, 5, 6)"),
     (("calibrate", "--loo", "--meshes", "/no/such/meshes", "--jobs", "1"),
      "woody calibrate: mesh spec '/no/such/meshes': not 'builtin', 'generated:N[:SEED]', a folder or a mesh file"),
 ])

@@ -79,6 +79,7 @@ def test_a_plant_camera_is_rendered_as_its_file_describes_and_the_vision_grades_
     rows = list(csv.DictReader((out / "verdicts.csv").open()))
     assert len(rows) == 6 and all(r["verdict"] == r["truth"] for r in rows), rows
     assert "resampled into the belt view" in (out / "logs" / "segmenter.log").read_text()
+    assert "cuts were fitted on the 'default' top camera, not this run's 'orbbec-femto'" in result.stderr
     with (out / "line.mcap").open("rb") as f:
         messages = make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
             topics=["/top_camera/depth/camera_info", "/tf_static"])

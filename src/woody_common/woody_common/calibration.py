@@ -108,6 +108,12 @@ class Calibration:
             return None
         return (min(speeds), max(speeds)) if speeds else None
 
+    @property
+    def top_camera(self) -> str:
+        """The top camera the grading cuts were fitted on (provenance ``top_camera``: a preset, or a camera file's
+        name without .yaml, written by `woody calibrate --top-camera`); 'default' when the file does not say."""
+        return str(self.provenance.get("top_camera", "default"))
+
 
 def _node_key(node: str) -> str:
     return f"/**/{node}"

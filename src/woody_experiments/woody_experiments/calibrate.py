@@ -56,7 +56,7 @@ from woody_common.calibration import (
     resolved_calibration,
     write_calibration,
 )
-from woody_common.line import CLASS_K, MAX_LANES, NORMAL_K, PAPER_SPEEDS_FPM, SEVERE_K
+from woody_common.line import CLASS_K, NORMAL_K, PAPER_SPEEDS_FPM, SEVERE_K
 from woody_experiments import cluster, evaluation, line_grade, physics_fit
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, load_meshes
@@ -118,7 +118,7 @@ def choose_threshold(cal_names: list[str], test_names: list[str], physics: dict,
     def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
         runs = [RunSpec(n, k, s, lanes=3, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
                         friction_static=physics["friction_static"], side=False, yaw_deg=mesh_yaw(n, args.yaw_sd),
-                        calibration=args.calibration)
+                        top_camera=args.top_camera, calibration=args.calibration)
                 for n in names for s in SPEEDS for k in CLASS_K]
         return _evaluate(runs, spec, client, desc)
 
@@ -138,10 +138,11 @@ def choose_line_cuts(cal_names: list[str], test_names: list[str], physics: dict,
                      client) -> dict:
     """The line's three cuts on the calibration meshes, and their figures on the held-out ones."""
     def rows_for(names: list[str], spec: str, desc: str) -> list[dict]:
-        """Rows of every lane of the widest line: the cuts see each place across the belt a fillet is seen from."""
-        runs = [RunSpec(n, k, s, lanes=MAX_LANES, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
+        """Rows of every lane of the widest line the camera sees: the cuts see each place across the belt a fillet
+        is seen from."""
+        runs = [RunSpec(n, k, s, lanes=args.lanes, mass=physics["total_mass_kg"], damping=physics["hinge_damping"],
                         friction_static=physics["friction_static"], side=False, condition=c,
-                        calibration=args.calibration)
+                        top_camera=args.top_camera, calibration=args.calibration)
                 for n in names for c in LINE_CONDITIONS for s in LINE_SPEEDS for k in LINE_K]
         return _evaluate(runs, spec, client, desc)
 
@@ -204,7 +205,8 @@ def _provenance(args: argparse.Namespace, report: dict, current: dict) -> dict:
     physics fit's record of the ``current`` calibration stays (its values do)."""
     out = {"command": "woody calibrate " + shlex.join(sys.argv[2:]), "date": time.strftime("%Y-%m-%d %H:%M:%S"),
            "calibration_meshes": args.meshes, "fit_meshes": report.get("fit_meshes", ""),
-           "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd,
+           "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd, "top_camera": Path(args.top_camera).stem,
+           "lanes": args.lanes,
            "targets": "paper Table sv_results (NMDM at k 0/10/100/200/400, "
            "100 and 130 FPM); ΔNMDM(k=100-k=0) 0.20-0.32; NMDM(k=0) gain >= 0.05 at 130 FPM"}
     if args.skip_physics:

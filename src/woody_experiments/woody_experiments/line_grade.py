@@ -68,7 +68,9 @@ def _design(rows: Sequence[dict]) -> np.ndarray:
 
 
 def _class_line(rows: Sequence[dict]) -> tuple[np.ndarray, float]:
-    """Least-squares coefficients of ln(line_phi) on the design, and the residual sd."""
+    """Least-squares coefficients of ln(line_phi) on the design, and the residual sd. A score of 0 (a line read
+    back to the axis, shape_score.extrapolate_at) has no logarithm and lies below every cut: it is left out."""
+    rows = [r for r in rows if r["line_phi"] > 0.0]
     x, y = _design(rows), np.log([r["line_phi"] for r in rows])
     coef = np.linalg.lstsq(x, y, rcond=None)[0]
     dof = max(1, len(rows) - x.shape[1])

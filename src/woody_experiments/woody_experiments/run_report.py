@@ -417,6 +417,16 @@ def uncalibrated_speed_note(fpm: float, calibrated: tuple[float, float] | None, 
             f"were fitted on: {what}")
 
 
+def other_camera_note(top_camera: str, calibrated_camera: str) -> str | None:
+    """The warning for a run whose top camera (a preset or a camera file) is not the one the calibration's cuts
+    were fitted on (Calibration.top_camera); None when it is."""
+    camera = Path(top_camera).stem
+    if camera == calibrated_camera:
+        return None
+    return (f"the calibration's cuts were fitted on the '{calibrated_camera}' top camera, not this run's "
+            f"'{camera}': fit them on it with woody calibrate --top-camera (docs/real-camera.md)")
+
+
 def calibrated_speeds(run_info: dict | None) -> tuple[float, float] | None:
     """The run's CALIBRATED_SPEEDS setting as (lowest, highest) FPM; None when the run does not record it."""
     try:

@@ -10,6 +10,8 @@ from pathlib import Path
 
 from woody_common.line import MAX_SPAWN_DURATION_S, SPEED_RANGE_FPM
 from woody_experiments.conditions import SWEEP_CONDITIONS
+from woody_sim.camera_description import is_camera_file
+from woody_sim.line_geometry import TOP_CAMERA_PRESETS, top_camera_preset
 from woody_sim.meshes import MAX_YAW_SD_DEG
 
 
@@ -65,6 +67,26 @@ def add_yaw_sd(parser: argparse.ArgumentParser, scope: str) -> None:
     parser.add_argument("--yaw-sd", type=YAW_SPREAD, default=0.0, metavar="DEG",
                         help="fillets lie turned on the belt: each mesh by DEG x a normal draw seeded by its name, "
                              f"the same at every k and speed (default 0: straight; {scope})")
+
+
+def add_top_camera(parser: argparse.ArgumentParser, scope: str) -> None:
+    """``--top-camera PRESET|FILE`` of the headless commands; ``scope`` ends the help with where it applies."""
+    parser.add_argument("--top-camera", default="default", metavar="PRESET|FILE",
+                        help=f"top camera: a preset ({', '.join(sorted(TOP_CAMERA_PRESETS))}; default: 672x376, "
+                             "0.75 m; paper: the seed system's 960x696, 86.6 deg, 0.33 m) or a camera description "
+                             f"file (config/cameras/*.yaml); {scope}")
+
+
+def top_camera_problem(args: argparse.Namespace) -> str:
+    """What is wrong with ``args.top_camera`` ('' when nothing); a camera file is made absolute, since the
+    workers read the same file."""
+    try:
+        top_camera_preset(args.top_camera)
+    except ValueError as exc:
+        return f"--top-camera: {exc}"
+    if is_camera_file(args.top_camera):
+        args.top_camera = str(Path(args.top_camera).resolve())
+    return ""
 
 
 def add_physics_workers(parser: argparse.ArgumentParser | argparse._ArgumentGroup, scope: str) -> None:

@@ -48,6 +48,7 @@ from woody_experiments.run_report import (
     Verdict,
     build_report,
     diversion_summary,
+    other_camera_note,
     uncalibrated_speed_note,
     unscored_diverted,
     verdict_table,
@@ -291,7 +292,7 @@ def run_checked(args: argparse.Namespace) -> int:
         _check_stop()
         lock = _claim_out(out, args.force)
         STOP.hangup_log = out / "logs" / HANGUP_LOG
-        for line in mesh_notes + speed_notes(args):
+        for line in mesh_notes + calibration_notes(args):
             print(f"woody run: {line}", file=sys.stderr, flush=True)
         try:
             return _run_line(args, fillets, out, monitor, mesh_notes)
@@ -309,12 +310,13 @@ def _check_stop() -> None:
         raise RunInterrupted(f"stopped by {STOP.name} before the line started; nothing written")
 
 
-def speed_notes(args: argparse.Namespace) -> list[str]:
+def calibration_notes(args: argparse.Namespace) -> list[str]:
     """A line per belt speed of the run (its --speed-fpm and --speed-change) outside the speeds the calibration's
-    cuts were fitted on: the grader leaves fillets measured there unscored (or grades them on extrapolated cuts with
-    --grade-outside-calibration)."""
+    cuts were fitted on (the grader leaves fillets measured there unscored, or grades them on extrapolated cuts with
+    --grade-outside-calibration), and one when its top camera is not the one they were fitted on."""
     speeds = dict.fromkeys((args.speed_fpm, args.speed_change_fpm or args.speed_fpm))
-    notes = (uncalibrated_speed_note(fpm, args.calibrated_speeds, args.grade_outside_calibration) for fpm in speeds)
+    notes = [uncalibrated_speed_note(fpm, args.calibrated_speeds, args.grade_outside_calibration) for fpm in speeds]
+    notes.append(other_camera_note(args.top_camera, args.calibrated_camera))
     return [note for note in notes if note]
 
 
@@ -596,7 +598,7 @@ def _write_outputs(args: argparse.Namespace, fillets: int | None, out: Path, mon
                            "was graded"]
     print(f"bag: {out / 'line.mcap'} ({recording})\nverdicts: {csv_path}\nreport: {report}\n"
           f"node logs: {out / 'logs'}/")
-    for line in mesh_notes + speed_notes(args):
+    for line in mesh_notes + calibration_notes(args):
         print(line)
     return problems
 

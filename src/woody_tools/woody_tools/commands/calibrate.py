@@ -10,6 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from woody_common.line import MAX_LANES
 from woody_experiments import calibrate, cluster
 from woody_experiments.mesh_sets import CALIBRATION_MESHES, LOO_MESHES, TEST_MESHES, load_meshes
 from woody_tools import arguments
@@ -37,6 +38,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "config/calibration.yaml)")
     parser.add_argument("--dry-run", action="store_true", help="print the results, do not write the calibration")
     arguments.add_yaw_sd(parser, "every step, --loo too; recorded in the calibration's provenance")
+    arguments.add_top_camera(parser, "the Φ threshold and the line cuts are fitted on what it sees (the physics fit "
+                                     "and --loo use the default camera); recorded in the calibration's provenance")
+    parser.add_argument("--lanes", type=int, choices=range(1, MAX_LANES + 1), default=MAX_LANES, metavar="N",
+                        help=f"lanes of the line the cuts are fitted on (1..{MAX_LANES}, default {MAX_LANES}: every "
+                             "place across the belt; fewer for a camera that does not see the widest line)")
     parser.add_argument("--loo", action="store_true",
                         help="leave-one-mesh-out check of the threshold on the reference meshes (k 0/100, 100 and "
                              "130 FPM, with the calibrated physics); writes loo.md / loo.json, writes no calibration")
@@ -47,6 +53,10 @@ def run(args: argparse.Namespace) -> int:
     problem = arguments.out_folder_problem(Path(args.out))
     if problem:
         print(f"woody calibrate: --out {args.out}: {problem}", file=sys.stderr)
+        return 2
+    problem = arguments.top_camera_problem(args)
+    if problem:
+        print(f"woody calibrate: {problem}", file=sys.stderr)
         return 2
     try:  # a set without a usable mesh is refused before a cluster starts; the steps find the sets loaded
         for spec in calibrate.mesh_specs(args):

@@ -253,12 +253,14 @@ def _validate_top_camera(args: argparse.Namespace) -> None:
 
 def _validate_calibration(args: argparse.Namespace) -> None:
     """Resolve ``--calibration`` to the file the nodes are given, refusing one that is not a calibration; sets
-    ``args.calibrated_speeds``, the line speeds its cuts were fitted on (None when it does not record them)."""
+    ``args.calibrated_speeds``, the line speeds its cuts were fitted on (None when it does not record them), and
+    ``args.calibrated_camera``, the top camera they were fitted on."""
     args.calibration = str(resolve_calibration(args.calibration))
     try:
-        args.calibrated_speeds = resolved_calibration(args.calibration).speed_range_fpm
+        calibration = resolved_calibration(args.calibration)
     except ValueError as exc:
         raise RunRefused(str(exc)) from None
+    args.calibrated_speeds, args.calibrated_camera = calibration.speed_range_fpm, calibration.top_camera
 
 
 def _validate_line(args: argparse.Namespace) -> None:

@@ -32,8 +32,6 @@ from woody_experiments.conditions import SWEEP_CONDITIONS, TIDY
 from woody_experiments.experiment import RunSpec
 from woody_experiments.mesh_sets import DEFAULT_MESHES, load_meshes
 from woody_experiments.run_report import uncalibrated_speed_note
-from woody_sim.camera_description import is_camera_file
-from woody_sim.line_geometry import TOP_CAMERA_PRESETS, top_camera_preset
 from woody_sim.line_world import PAPER_PHYSICS, PhysicsConfig
 from woody_sim.sensor_model import PRESETS
 from woody_tools import arguments
@@ -60,10 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="total chain mass M in kg (default: the calibration's)")
     parser.add_argument("--sensor", default="ideal", choices=sorted(PRESETS),
                         help="top camera error model (docs/sensors.md); use its own --out; default ideal")
-    parser.add_argument("--top-camera", default="default", metavar="PRESET|FILE",
-                        help=f"top camera: a preset ({', '.join(sorted(TOP_CAMERA_PRESETS))}; default: 672x376, "
-                             "0.75 m; paper: the seed system's 960x696, 86.6 deg, 0.33 m) or a camera description "
-                             "file (config/cameras/*.yaml; its error model is --sensor's); one camera per --out folder")
+    arguments.add_top_camera(parser, "a file's error model is --sensor's; one camera per --out folder")
     arguments.add_yaw_sd(parser, "one setting per --out folder")
     parser.add_argument("--lane-pitch", type=float, default=LANE_PITCH_M, metavar="M",
                         help=f"distance between lane centres (default {LANE_PITCH_M:g} m; one setting per --out "
@@ -91,13 +86,7 @@ def _geometry_problem(args: argparse.Namespace) -> str:
         check_lane_pitch(args.lanes, args.lane_pitch)
     except ValueError as exc:
         return f"--lane-pitch: {exc}"
-    try:
-        top_camera_preset(args.top_camera)
-    except ValueError as exc:
-        return f"--top-camera: {exc}"
-    if is_camera_file(args.top_camera):
-        args.top_camera = str(Path(args.top_camera).resolve())
-    return ""
+    return arguments.top_camera_problem(args)
 
 
 def run(args: argparse.Namespace) -> int:
