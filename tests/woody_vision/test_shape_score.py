@@ -24,7 +24,6 @@ from woody_vision.shape_score import (
     REASON_LOST_IN_WINDOW,
     REASON_OVERDUE_BEFORE_EDGE,
     REASON_STARTED_PAST_EDGE,
-    REASON_UNCLOSED,
     REASON_WINDOW_GAP,
     STATUS_SCORED,
     STATUS_UNSCORED,
@@ -411,36 +410,6 @@ def test_a_fillet_lost_in_its_window_is_overdue_once_its_centroid_is_past_the_ed
     assert approaching.overdue((closes + 3) / FPS).reason == REASON_OVERDUE_BEFORE_EDGE
     assert ShapeEvaluator(EDGE).overdue(1.0) is None  # nothing seen: no speed, no position
     assert run_evaluator(contours)[2].overdue(10.0) is None  # decided already
-
-
-def test_a_fillet_lost_past_its_confirmed_measuring_point_keeps_its_line_score_without_phi():
-    """The measuring point (0.3 L here, before the centroid's crossing) passed and a clean frame after it: the line
-    score is known, however the window then fails to close (track ended, overdue, a late close)."""
-    contours = translating(80, bend=drooping)
-    whole = ShapeEvaluator(EDGE, line_fraction=0.3)
-    plain = next(r for i, c in enumerate(contours) if (r := whole.update(c, i / FPS)) is not None)
-    first = round(plain.trace[0].stamp * FPS)
-    past = first + next(k for k, f in enumerate(plain.trace) if f.overhang >= 0.3)  # the frame past the point
-    closes = round(plain.trace[-1].stamp * FPS)
-    assert past + 3 < closes  # the window closes well after the measuring point
-
-    def lost_after(last: int) -> ShapeEvaluator:
-        evaluator = ShapeEvaluator(EDGE, line_fraction=0.3)
-        for i in range(last + 1):
-            assert evaluator.update(contours[i], i / FPS) is None
-        return evaluator
-
-    ended = lost_after(past + 1).finish()
-    overdue = lost_after(past + 1).overdue((closes + 3) / FPS)
-    late = lost_after(past + 1)
-    late_close = next(r for i in range(closes + 4, 80) if (r := late.update(contours[i], i / FPS)) is not None)
-    for result in (ended, overdue, late_close):
-        assert result.status == STATUS_SCORED and result.line_phi == pytest.approx(plain.line_phi)
-        assert math.isnan(result.phi) and result.reason.startswith("phi absent")
-    assert ended.reason == REASON_UNCLOSED and late_close.reason.startswith("phi absent: frames lost")
-    assert abs(overdue.stamp - plain.trace[-1].stamp) <= 1 / FPS  # stamped when its centroid was due at the edge
-    unconfirmed = lost_after(past).finish()  # the frame past the point, and none after it: a neighbour may have
-    assert unconfirmed.status == STATUS_UNSCORED  # joined that frame's outline
 
 
 def test_evaluator_options_are_validated():

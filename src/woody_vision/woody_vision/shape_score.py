@@ -124,7 +124,6 @@ REASON_LOST_IN_WINDOW = "track ended before the evaluation window closed"
 REASON_DEGENERATE = "degenerate reference contour"
 REASON_LATE_CLOSE = "frames lost at the roller edge: the window closed {:.0f} px past the fillet's centroid"
 REASON_WINDOW_GAP = "phi absent: frames lost in the evaluation window ({:.3f} s without a frame of this fillet)"
-REASON_UNCLOSED = "phi absent: no clean frame of this fillet as its centroid crossed the roller edge"
 REASON_OVERDUE_BEFORE_EDGE = ("fillet not seen since before the roller edge, and by its speed its centroid is past "
                               "it: unscored while the gate can still act")
 REASON_OVERDUE_IN_WINDOW = ("no clean frame closed the evaluation window, and by its speed the fillet's centroid is "
@@ -649,8 +648,6 @@ class ShapeEvaluator:
             self._paper_trace.append(frame if image is points else self._score_image(image, stamp, overhang))
             overshoot = trailing + reference.centroid_offset_px - self.edge_row
             if overshoot >= 0.0 and overshoot > GAP_FRAMES * self._advance_per_frame():
-                if self._confirmed():
-                    return self._finish_line()  # the line score's frames came; only the paper's Φ misses its close
                 return self._finish(STATUS_UNSCORED, REASON_LATE_CLOSE.format(overshoot))
             self._closed = overshoot >= 0.0
         if self._closed and self._confirmed():
@@ -718,11 +715,7 @@ class ShapeEvaluator:
         extent, own = np.ptp(points[:, 1]), np.ptp(self._reference_contour[:, 1])
         return extent > (1.0 + SPILL_RATIO) * own
 
-    def _finish_line(self, stamp: float | None = None) -> ShapeResult:
-        """The line score from the frames around the measuring point (``stamp``: the result's, if not the last
-        frame's). Also when the window never closed, once a clean frame past that point confirmed it
-        (:meth:`_confirmed`): the line score needs no more; only the paper's Φ, a maximum up to the close, is
-        then absent."""
+    def _finish_line(self) -> ShapeResult:
         frames = self._trace + self._extra
         kept, own = own_frames(frames)
         self._rejected += len(frames) - len(kept)
@@ -731,12 +724,10 @@ class ShapeEvaluator:
         if nearer is None or not math.isfinite(line_phi) or is_gap(gap, step):
             line_phi, nearer = extrapolate_at(own, self.line_fraction, step)
         if nearer is None or not math.isfinite(line_phi):
-            return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected),
-                                stamp=stamp)
-        reason = (REASON_WINDOW_GAP.format(self._window_gap) if self._window_gap
-                  else "" if self._closed else REASON_UNCLOSED)
+            return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
+        reason = REASON_WINDOW_GAP.format(self._window_gap) if self._window_gap else ""
         nearer = kept[nearer]
-        return self._finish(STATUS_SCORED, reason, line_phi, self._contours[nearer], frames[nearer].stamp, stamp)
+        return self._finish(STATUS_SCORED, reason, line_phi, self._contours[nearer], frames[nearer].stamp)
 
     def _advance_per_frame(self) -> float:
         """Rows the fillet moved per camera frame while flat (inf when too few frames tell)."""
@@ -773,8 +764,6 @@ class ShapeEvaluator:
         due = self._trailing_stamp + (self.edge_row - reference.centroid_offset_px - self._last_trailing) / speed
         if self._reference is None:
             return self._finish(STATUS_UNSCORED, REASON_OVERDUE_BEFORE_EDGE, stamp=due)
-        if self._confirmed():
-            return self._finish_line(stamp=due)
         return self._finish(STATUS_UNSCORED, REASON_OVERDUE_IN_WINDOW.format(overshoot), stamp=due)
 
     def _front_past_edge(self, stamp: float) -> bool:
@@ -788,7 +777,7 @@ class ShapeEvaluator:
         """The track ended: the unscored result, or None if a result was already produced."""
         if self._phase is _Phase.DONE:
             return None
-        if self._closed or self._confirmed():
+        if self._closed:
             return self._finish_line()  # scored on the frames around the measuring point, if it was passed
         reason = REASON_LOST_IN_WINDOW if self._trace else REASON_LOST_BEFORE_EDGE
         return self._finish(STATUS_UNSCORED, reason)
