@@ -110,9 +110,15 @@ class Calibration:
 
     @property
     def top_camera(self) -> str:
-        """The top camera the grading cuts were fitted on (provenance ``top_camera``: a preset, or a camera file's
-        name without .yaml, written by `woody calibrate --top-camera`); 'default' when the file does not say."""
+        """The top camera the grading cuts were fitted on (provenance ``top_camera``, :func:`camera_name`, written
+        by `woody calibrate --top-camera`); 'default' when the file does not say."""
         return str(self.provenance.get("top_camera", "default"))
+
+
+def camera_name(top_camera: str) -> str:
+    """How a calibration names a top camera: a preset by itself, a camera description file by its name without
+    .yaml (wherever it lies)."""
+    return Path(top_camera).stem
 
 
 def _node_key(node: str) -> str:

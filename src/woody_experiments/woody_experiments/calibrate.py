@@ -52,6 +52,7 @@ import numpy as np
 from woody_common.calibration import (
     LIST_FIELDS,
     Calibration,
+    camera_name,
     resolve_calibration,
     resolved_calibration,
     write_calibration,
@@ -205,7 +206,7 @@ def _provenance(args: argparse.Namespace, report: dict, current: dict) -> dict:
     physics fit's record of the ``current`` calibration stays (its values do)."""
     out = {"command": "woody calibrate " + shlex.join(sys.argv[2:]), "date": time.strftime("%Y-%m-%d %H:%M:%S"),
            "calibration_meshes": args.meshes, "fit_meshes": report.get("fit_meshes", ""),
-           "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd, "top_camera": Path(args.top_camera).stem,
+           "test_meshes": args.test_meshes, "yaw_sd_deg": args.yaw_sd, "top_camera": camera_name(args.top_camera),
            "lanes": args.lanes,
            "targets": "paper Table sv_results (NMDM at k 0/10/100/200/400, "
            "100 and 130 FPM); ΔNMDM(k=100-k=0) 0.20-0.32; NMDM(k=0) gain >= 0.05 at 130 FPM"}

@@ -14,6 +14,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from woody_common.calibration import camera_name
 from woody_common.line import mps_to_fpm
 from woody_experiments.line_grade import GRADES, true_grade
 
@@ -420,7 +421,7 @@ def uncalibrated_speed_note(fpm: float, calibrated: tuple[float, float] | None, 
 def other_camera_note(top_camera: str, calibrated_camera: str) -> str | None:
     """The warning for a run whose top camera (a preset or a camera file) is not the one the calibration's cuts
     were fitted on (Calibration.top_camera); None when it is."""
-    camera = Path(top_camera).stem
+    camera = camera_name(top_camera)
     if camera == calibrated_camera:
         return None
     return (f"the calibration's cuts were fitted on the '{calibrated_camera}' top camera, not this run's "

@@ -36,7 +36,6 @@ from woody_common.line import (
 )
 from woody_sim.camera_description import is_camera_file, load_camera
 from woody_sim.line_conditions import LINE_PRESETS, MAX_LATERAL_M, MAX_YAW_DEG, SCALE_RANGE, LineConditions
-from woody_sim.line_geometry import TOP_CAMERA_PRESETS, top_camera_preset
 from woody_sim.meshes import MAX_YAW_SD_DEG
 from woody_sim.sensor_model import PRESETS
 from woody_tools import arguments, line_run
@@ -75,10 +74,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="output folder (default bags/run-<time>)")
     parser.add_argument("--realtime", action="store_true", help="pace the simulation to the wall clock")
     parser.add_argument("--side-rate", type=float, default=60.0, help="side camera frame rate, Hz (default 60)")
-    parser.add_argument("--top-camera", default="default", metavar="PRESET|FILE",
-                        help=f"top camera: a preset ({', '.join(sorted(TOP_CAMERA_PRESETS))}; default: 672x376, "
-                             "0.75 m; paper: the seed system's 960x696, 86.6 deg, 0.33 m) or a camera description "
-                             "file (config/cameras/*.yaml: resolution, intrinsics, distortion, mount, timing)")
+    arguments.add_top_camera(parser, "a file gives resolution, intrinsics, distortion, mount and timing, and the "
+                                     "error model unless --sensor is given")
     parser.add_argument("--calibration", default=None, metavar="FILE",
                         help="calibration file given to line_sim and the grader as a ROS params file "
                              f"(default ${ENV_VAR}, else the installed config/calibration.yaml)")
@@ -239,16 +236,11 @@ def _validate_vision_setup(args: argparse.Namespace) -> None:
 def _validate_top_camera(args: argparse.Namespace) -> None:
     """A top camera preset, or a description file made absolute for the nodes; ``--sensor`` not given becomes the
     file's error model (else ideal)."""
-    try:
-        described = load_camera(args.top_camera) if is_camera_file(args.top_camera) else None
-        if described is None:
-            top_camera_preset(args.top_camera)
-    except ValueError as exc:
-        raise RunRefused(f"--top-camera: {exc}") from None
-    if described is not None:
-        args.top_camera = str(Path(args.top_camera).resolve())
+    problem = arguments.top_camera_problem(args)
+    if problem:
+        raise RunRefused(problem)
     if args.sensor is None:
-        args.sensor = described.sensor if described is not None else "ideal"
+        args.sensor = load_camera(args.top_camera).sensor if is_camera_file(args.top_camera) else "ideal"
 
 
 def _validate_calibration(args: argparse.Namespace) -> None:
