@@ -276,7 +276,7 @@ def test_segmentation_params_are_validated():
     for bad in (dict(height_threshold_m=0.0), dict(min_area_px=0), dict(open_kernel_px=-1),
                 dict(split_solidity=1.5), dict(core_ratio=1.0), dict(height_core_floor=0.8),
                 dict(height_core_floor=0.0), dict(color_threshold=-1.0),
-                dict(color_search_px=-1), dict(split_length_px=-1.0)):
+                dict(color_search_px=-1), dict(split_length_px=-1.0), dict(split_area_px=-1.0)):
         with pytest.raises(ValueError):
             SegmentationParams(**bad)
 
@@ -423,6 +423,11 @@ def test_a_thin_fillet_touching_a_thick_one_side_by_side_is_split_below_the_firs
     assert len(segment_height_map(height, one_cut)) == 1, "the default cut finds the thick one's middle only"
     blobs = segment_height_map(height, SegmentationParams(split_width_px=80.0, height_core_floor=0.5))
     assert sorted(round(b.centroid[0] / 10) for b in blobs) == [9, 15]
+    area = float(np.count_nonzero(height > DEFAULT_HEIGHT_THRESHOLD_M))
+    larger = SegmentationParams(split_width_px=80.0, split_area_px=0.9 * area)
+    assert sorted(round(b.centroid[0] / 10) for b in segment_height_map(height, larger)) == [9, 15], \
+        "covering more belt than one fillet can, the pair is split at the default floor too"
+    assert len(segment_height_map(height, SegmentationParams(split_width_px=80.0, split_area_px=1.1 * area))) == 1
 
 
 def test_two_fillets_touching_end_to_end_without_a_neck_are_split_by_height_when_too_long_for_one():

@@ -138,6 +138,10 @@ MAX_SPEED_MPS = fpm_to_mps(SPEED_RANGE_FPM[1])
 MAX_FILLET_WIDTH_M = 0.13
 """The widest a single fillet lies across the flow when straight (generated widths reach 0.11 m, sizes x1.15):
 a blob wider than this may be two fillets side by side (the segmenter checks it by height)."""
+MAX_FILLET_AREA_M2 = 0.025
+"""The most belt a single fillet covers seen from above (the meshes' footprints reach 168 cm², 222 cm² at the messy
+line's largest size, x1.15): a blob wider than MAX_FILLET_WIDTH_M that covers more than this is surely fillets side
+by side, and the segmenter splits it however little their heights part them."""
 MAX_FILLET_LENGTH_M = 0.30
 """The longest a single fillet lies along the flow (on the messy line the built-in and generated meshes span 0.27 m
 at most, large and turned): a blob longer than this is two fillets touching end to end (the segmenter splits it by

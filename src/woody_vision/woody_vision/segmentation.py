@@ -31,7 +31,7 @@ import cv2
 import numba
 import numpy as np
 
-from woody_common.line import MAX_FILLET_LENGTH_M, MAX_FILLET_WIDTH_M
+from woody_common.line import MAX_FILLET_AREA_M2, MAX_FILLET_LENGTH_M, MAX_FILLET_WIDTH_M
 from woody_vision.flood import flood
 
 DEFAULT_HEIGHT_THRESHOLD_M = 0.0005
@@ -97,6 +97,11 @@ class SegmentationParams:
     """Components longer than this along the flow (rows) are two fillets touching end to end, however solid they
     look, and are split at their necks like a non-convex one (0 = off; the segmenter sets it from the camera and
     ``max_fillet_length_m``)."""
+    split_area_px: float = 0.0
+    """Components wider than ``split_width_px`` that cover more pixels than this are surely fillets side by side
+    (one turned fillet lies as wide, but covers no more than its own area): their relief is cut down to
+    LONG_CORE_FLOOR, like a component too long for one fillet, not only to ``height_core_floor`` (0 = off; the
+    segmenter sets it from the camera and ``max_fillet_area_m2``)."""
     fill_invalid_px: int = 0
     """Pixels without a depth measurement take the mean height of the valid ones within this radius (0 = off):
     a real camera's holes at a fillet's border would otherwise notch its contour."""
@@ -119,11 +124,14 @@ class SegmentationParams:
     off, and more woody fillets pass (13 against 9 of 1,152, docs/results.md)."""
 
     def for_camera(self, k, camera_height_m: float, max_width_m: float = MAX_FILLET_WIDTH_M,
-                   max_length_m: float = MAX_FILLET_LENGTH_M) -> SegmentationParams:
-        """These parameters with ``split_width_px`` and ``split_length_px`` for a camera (row-major K) this high
-        over the belt: the widest and the longest a single fillet lies, in its pixels."""
-        return dataclasses.replace(self, split_width_px=max_width_m * k[0] / camera_height_m,
-                                   split_length_px=max_length_m * k[4] / camera_height_m)
+                   max_length_m: float = MAX_FILLET_LENGTH_M,
+                   max_area_m2: float = MAX_FILLET_AREA_M2) -> SegmentationParams:
+        """These parameters with ``split_width_px``, ``split_length_px`` and ``split_area_px`` for a camera
+        (row-major K) this high over the belt: the widest, the longest and the largest a single fillet lies, in its
+        pixels."""
+        across, along = k[0] / camera_height_m, k[4] / camera_height_m
+        return dataclasses.replace(self, split_width_px=max_width_m * across, split_length_px=max_length_m * along,
+                                   split_area_px=max_area_m2 * across * along)
 
     def __post_init__(self) -> None:
         if not self.height_threshold_m > 0.0:
@@ -137,9 +145,9 @@ class SegmentationParams:
         if not (0.0 < self.core_ratio < 1.0 and 0.0 < self.height_core_floor <= self.height_core_ratio < 1.0):
             raise ValueError(f"core_ratio must be in (0, 1) and 0 < height_core_floor <= height_core_ratio < 1, got "
                              f"{self.core_ratio}, {self.height_core_floor}, {self.height_core_ratio}")
-        if not (self.split_width_px >= 0.0 and self.split_length_px >= 0.0):
-            raise ValueError(f"split_width_px and split_length_px must be >= 0, got {self.split_width_px}, "
-                             f"{self.split_length_px}")
+        if not (self.split_width_px >= 0.0 and self.split_length_px >= 0.0 and self.split_area_px >= 0.0):
+            raise ValueError(f"split_width_px, split_length_px and split_area_px must be >= 0, got "
+                             f"{self.split_width_px}, {self.split_length_px}, {self.split_area_px}")
         if self.color_threshold < 0 or self.color_search_px < 0:
             raise ValueError(f"color_threshold and color_search_px must be >= 0, got {self.color_threshold}, "
                              f"{self.color_search_px}")
@@ -360,11 +368,13 @@ def _split_component(component: np.ndarray, height: np.ndarray,
 
 def _split_if_wide(part: tuple[np.ndarray, np.ndarray | None], height: np.ndarray,
                    params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
-    """The part, or the fillets side by side in it when it is wider than one fillet can be."""
+    """The part, or the fillets side by side in it when it is wider than one fillet can be (cut deeper when it also
+    covers more than one fillet can)."""
     mask = part[0]
     if not 0.0 < params.split_width_px < cv2.boundingRect(mask)[2]:
         return [part]
-    return _split_by_height(mask, height, params) or [part]
+    surely = 0.0 < params.split_area_px < cv2.countNonZero(mask)
+    return _split_by_height(mask, height, params, floor=LONG_CORE_FLOOR if surely else None) or [part]
 
 
 def _split_if_long(part: tuple[np.ndarray, np.ndarray | None], height: np.ndarray,
@@ -395,19 +405,20 @@ def _split_by_distance(component: np.ndarray, contour: np.ndarray,
 
 
 def _split_by_height(component: np.ndarray, height: np.ndarray, params: SegmentationParams,
-                     along: bool = False) -> list[tuple[np.ndarray, None]] | None:
+                     along: bool = False, floor: float | None = None) -> list[tuple[np.ndarray, None]] | None:
     """A wide component split into the fillets around its thick cores (height watershed), or None if it has one.
 
     Pixels higher than a fillet lying on the belt can be (past the roller edge the background is the floor) are
     left out of the relief: the cores are the middles of the fillets still on the belt. The cores are cut from
     the relief at ``height_core_ratio`` × its highest pixel first, then lower, down to ``height_core_floor``: a
     thin fillet beside a thick one rises above a lower cut only. ``along``: the cores lie one behind the other
-    along the flow (a component too long for one fillet, so surely two), cut down to LONG_CORE_FLOOR.
+    along the flow (a component too long for one fillet, so surely two), cut down to LONG_CORE_FLOOR. ``floor``:
+    the lowest cut when it is not ``height_core_floor`` (fillets surely side by side).
     """
     relief = np.asarray(height, np.float32).copy()
     relief[(component == 0) | (relief > MAX_LYING_HEIGHT_M)] = 0.0
     top = float(relief.max())
-    floor = LONG_CORE_FLOOR if along else params.height_core_floor
+    floor = LONG_CORE_FLOOR if along else floor or params.height_core_floor
     for ratio in np.arange(params.height_core_ratio, floor - 1e-9, -CORE_RATIO_STEP):
         markers, cores = _fillet_cores(cv2.compare(relief, float(ratio) * top, cv2.CMP_GT), params, along)
         if len(cores) >= 2:

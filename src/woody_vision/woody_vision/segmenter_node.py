@@ -37,6 +37,7 @@ from woody_common.line import (
     LANE_PITCH_M,
     LANE_PITCH_RANGE_M,
     LANES,
+    MAX_FILLET_AREA_M2,
     MAX_FILLET_LENGTH_M,
     MAX_FILLET_WIDTH_M,
     MAX_LANES,
@@ -78,6 +79,9 @@ class Segmenter(Node):
         self.max_fillet_length = declare(self, "max_fillet_length_m", MAX_FILLET_LENGTH_M, "A blob longer along the "
                                          "flow than this is split into the fillets touching end to end in it (m; 0 = "
                                          "off).", 0.0, 2.0)
+        self.max_fillet_area = declare(self, "max_fillet_area_m2", MAX_FILLET_AREA_M2, "A blob wider than "
+                                       "max_fillet_width_m that covers more belt than this is surely fillets side by "
+                                       "side, split however little their heights part them (m²; 0 = off).", 0.0, 1.0)
         self.depth_unit = declare(self, "depth_unit_m", DEPTH_UNIT_M, "One step of a 16UC1 depth image (m; REP "
                                   "118: 0.001, millimetres).", 1e-5, 0.01)
         self.camera_height = declare(self, "camera_height_m", TOP_CAMERA_HEIGHT_M,
@@ -189,7 +193,8 @@ class Segmenter(Node):
             return
         height = self.belt_view.height_m
         layout = LaneLayout(tuple(info.k), height, self.lanes, self.lane_pitch)
-        self.params = self.params.for_camera(info.k, height, self.max_fillet_width, self.max_fillet_length)
+        self.params = self.params.for_camera(info.k, height, self.max_fillet_width, self.max_fillet_length,
+                                             self.max_fillet_area)
         if self.tracker is None:
             self.tracker = CentroidTracker(lane_layout=layout, **self.tracker_options)
         else:  # tf_static came after the first camera_info: its mount from now on
