@@ -20,6 +20,7 @@ from woody_vision.grader_core import (
 )
 from woody_vision.grading import FittedRange, GradingRules
 from woody_vision.shape_score import (
+    MIN_SIGHTINGS,
     REASON_LOST_BEFORE_EDGE,
     REASON_LOST_IN_WINDOW,
     REASON_STARTED_PAST_EDGE,
@@ -142,9 +143,10 @@ def test_a_piece_split_off_past_the_edge_gets_no_verdict_but_a_fillet_appearing_
     piece = np.array([[290, 205], [310, 205], [310, 225], [290, 225]], np.int32)
     for i, contour in enumerate(shapes[:30]):  # seen flat, then at the edge: its reference is locked
         assert grader.on_tracks(i / FPS, [TrackObservation(1, 0, contour)]) == []
-    assert grader.on_tracks(30 / FPS, [TrackObservation(1, 0, shapes[30]), TrackObservation(2, 0, piece)]) == []
+    for i in range(30, 30 + MIN_SIGHTINGS):
+        assert grader.on_tracks(i / FPS, [TrackObservation(1, 0, shapes[i]), TrackObservation(2, 0, piece)]) == []
     assert grader.fragments == 1
-    ((_, alone),) = feed(FilletGrader(EDGE), 3, 1, [piece])  # nothing in its lane: unscored, but heard
+    ((_, alone),) = feed(FilletGrader(EDGE), 3, 1, [piece] * MIN_SIGHTINGS)  # nothing in its lane: heard
     assert alone.label == "unscored" and alone.shape.reason == REASON_STARTED_PAST_EDGE
 
 
@@ -155,7 +157,10 @@ def test_a_fillet_first_seen_past_the_edge_beside_its_lane_neighbour_gets_its_un
     for i, contour in enumerate(shapes[:30]):
         assert grader.on_tracks(i / FPS, [TrackObservation(1, 0, contour)]) == []
     hidden = contours(1, start_tip_v=EDGE + 60.0)[0]  # a whole fillet's outline, already past the edge
-    (verdict,) = grader.on_tracks(30 / FPS, [TrackObservation(1, 0, shapes[30]), TrackObservation(2, 0, hidden)])
+    verdicts = [grader.on_tracks(i / FPS, [TrackObservation(1, 0, shapes[i]), TrackObservation(2, 0, hidden)])
+                for i in range(30, 30 + MIN_SIGHTINGS)]
+    assert verdicts[:-1] == [[]] * (MIN_SIGHTINGS - 1), "heard once it is seen as often as any fillet"
+    (verdict,) = verdicts[-1]
     assert verdict.fillet_id == 2 and verdict.label == "unscored" and verdict.shape.reason == REASON_STARTED_PAST_EDGE
     assert grader.fragments == 0
 

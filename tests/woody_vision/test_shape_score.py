@@ -17,9 +17,11 @@ from woody_common.line import TOP_CAMERA_HEIGHT_M
 from woody_vision.camera_model import LaneLayout
 from woody_vision.segmentation import segment_depth
 from woody_vision.shape_score import (
+    FOREIGN_SHARE,
     LEADING_BLUNT,
     LEADING_NARROW,
     LINE_OVERHANG_FRACTION,
+    MIN_SIGHTINGS,
     REASON_LOST_BEFORE_EDGE,
     REASON_LOST_IN_WINDOW,
     REASON_OVERDUE_BEFORE_EDGE,
@@ -38,6 +40,7 @@ from woody_vision.shape_score import (
     leading_cut_rows,
     leading_end,
     make_reference,
+    outside_share,
     own_frames,
     rising_envelope,
     shape_terms,
@@ -362,9 +365,11 @@ def test_a_burst_of_frames_lost_at_the_edge_leaves_the_fillet_unscored_not_misgr
     assert plain.status == scored.status == STATUS_SCORED
 
 
-def test_unscored_when_the_track_starts_past_the_edge():
+def test_unscored_when_the_track_starts_past_the_edge_once_seen_three_times():
     evaluator = ShapeEvaluator(EDGE)
-    result = evaluator.update(translating(1, start_lead_v=EDGE + 5.0)[0], 0.0)
+    frames = translating(MIN_SIGHTINGS, start_lead_v=EDGE + 5.0)
+    *first, result = [evaluator.update(contour, i / FPS) for i, contour in enumerate(frames)]
+    assert first == [None] * (MIN_SIGHTINGS - 1), "a piece split off for a frame or two gives no verdict"
     assert result.status == STATUS_UNSCORED and result.reason == REASON_STARTED_PAST_EDGE
     assert math.isnan(result.phi) and math.isnan(result.aspect_ratio) and result.reference_stamp is None
     assert evaluator.finish() is None
@@ -516,6 +521,31 @@ def test_a_window_frame_reaching_beyond_the_fillets_columns_or_length_is_rejecte
     crowded[opens + 2] = with_box(contours[opens + 2], 297, lead - 2, 303, lead + 20)  # the lane-mate hanging ahead
     _, result, _ = run_evaluator(crowded)
     assert result.rejected_frames == plain.rejected_frames + 2
+    assert result.line_phi == pytest.approx(plain.line_phi)
+
+
+def test_a_bending_fillet_stays_in_its_footprint_riding_the_belt_and_a_neighbours_piece_does_not():
+    """On the belt plane bending over the roller only shortens a fillet along the flow, part by part in its own
+    columns: what its outline covers outside its footprint moved with the belt is another fillet's."""
+    flat, bent = translating(1)[0], translating(1, bend=foreshorten(0.5))[0]
+    moved = flat + (0, 40)
+    assert outside_share(flat, flat, 0) == 0.0 and outside_share(flat, bent, 0) == 0.0
+    assert outside_share(flat, moved, 40) == 0.0 and outside_share(flat, moved, 0) > FOREIGN_SHARE
+    trailing = rows_of(bent)[0]
+    assert outside_share(flat, with_box(bent, 300, trailing, 328, trailing + 6), 0) > FOREIGN_SHARE
+
+
+def test_a_window_frame_holding_a_neighbours_piece_within_its_columns_and_length_is_rejected():
+    """A neighbour's hanging part joined beside the fillet's round trailing end: no wider, no longer, a little larger
+    and with its own trailing edge, so only the footprint tells it is not this fillet's."""
+    contours = translating(90, bend=drooping)
+    _, plain, _ = run_evaluator(contours)
+    opens = round(plain.trace[0].stamp * FPS)
+    crowded = list(contours)
+    trailing = rows_of(contours[opens + 1])[0]
+    crowded[opens + 1] = with_box(contours[opens + 1], 300, trailing, 328, trailing + 6)
+    _, result, _ = run_evaluator(crowded)
+    assert result.rejected_frames == plain.rejected_frames + 1 and result.frames == plain.frames - 1, "never scored"
     assert result.line_phi == pytest.approx(plain.line_phi)
 
 

@@ -138,7 +138,7 @@ def test_prediction_bridges_frames_the_segmenter_saw_empty():
     tracker.update([], 4 / FPS)
     (again,) = tracker.update([square_blob(200, 150)], 5 / FPS).active  # 30 px from the last sighting, 0 predicted
     assert again.track_id == track.track_id and again.unseen == 0
-    assert again.velocity == pytest.approx((0.0, 10.0 * FPS))
+    assert again.velocity == pytest.approx((10.0 * FPS, 10.0 * FPS))  # (trailing, leading) edge
 
 
 def test_prediction_bridges_frames_that_never_arrived():
@@ -263,3 +263,41 @@ def test_predicted_outlines_are_the_seen_established_tracks_moved_by_their_motio
     (outline,) = tracker.predicted_outlines(5 / FPS)  # two frames on, at 10 px per frame
     assert np.array_equal(outline, square_blob(100.0, 100.0).contour)
     assert CentroidTracker().predicted_outlines(0.0) == []
+
+
+def blob_rows(u: float, trailing: float, leading: float, half: int = 25) -> Blob:
+    """A box blob spanning rows ``trailing`` .. ``leading`` around column ``u``."""
+    contour = np.array([[u - half, trailing], [u + half, trailing], [u + half, leading], [u - half, leading]],
+                       np.int32)
+    rows = int(leading - trailing) + 1
+    return Blob(contour=contour, centroid=(float(u), (trailing + leading) / 2.0), area_px=2 * half * rows,
+                bbox=(int(u - half), int(trailing), 2 * half, rows), mean_height_m=0.02)
+
+
+def test_a_fillet_tipping_over_the_roller_is_followed_by_its_trailing_edge_riding_the_belt():
+    """Past the edge the visible outline shortens from the front (its centroid stalls, then jumps back when the
+    hanging part vanishes) while the trailing edge keeps the belt's 10 px a frame: one track throughout, and a
+    lane-mate arriving behind keeps its own."""
+    tracker = CentroidTracker(max_distance_px=20.0)
+    for i in range(6):  # flat, 100 rows long
+        (track,) = tracker.update([blob_rows(300, 100 + 10 * i, 200 + 10 * i)], i / FPS).active
+    for i, lead in enumerate((255, 258, 260, 262, 215, 216), start=6):  # tipping: the front falls away
+        trailing = 100 + 10 * i
+        update = tracker.update([blob_rows(300, trailing, lead), blob_rows(300, trailing - 120, trailing - 20)],
+                                i / FPS)
+        owners = {t.blob.bbox[1]: t.track_id for t in update.active if t.unseen == 0}
+        assert owners[trailing] == track.track_id, f"frame {i}"
+
+
+def test_a_track_that_left_the_image_border_never_takes_a_blob_at_the_border():
+    """A fillet whose blob is missing for a frame (merged with a neighbour's) lies 36 px ahead of the next fillet of
+    its lane entering the view: within the gate, but a fillet that has left the border never reaches it again. Its
+    track waits and takes its own blob back; the entering fillet opens its own."""
+    tracker = CentroidTracker(max_distance_px=40.0)
+    for i in range(17):  # entering, then whole in view at 8 px a frame: trailing edge at row 28
+        (fillet,) = tracker.update([blob_rows(300, max(0, 8 * i - 100), 8 * i + 20)], i / FPS).active
+    update = tracker.update([blob_rows(300, 0, 14)], 17 / FPS)
+    assert next(t for t in update.active if t.track_id == fillet.track_id).unseen == 1
+    update = tracker.update([blob_rows(300, 44, 164), blob_rows(300, 0, 22)], 18 / FPS)
+    owners = {t.blob.bbox[1]: t.track_id for t in update.active if t.unseen == 0}
+    assert owners[44] == fillet.track_id and owners[0] != fillet.track_id

@@ -31,6 +31,7 @@ from woody_common.calibration import resolved_calibration
 from woody_vision.grading import LABEL_NORMAL, LABEL_UNSCORED, FilletConditions, FittedRange, GradingRules
 from woody_vision.shape_score import (
     LEADING_BLUNT,
+    MIN_SIGHTINGS,
     REASON_LOST_BEFORE_EDGE,
     REASON_OVERDUE_BEFORE_EDGE,
     REASON_STARTED_PAST_EDGE,
@@ -155,9 +156,6 @@ little. Chosen on one set of live runs and checked on disjoint ones (docs/result
 
 REASON_JOINED_THROUGH = ("outline joined a neighbour's through its window ({} frames merged, {:.3f} s of frames lost) "
                          "and split from it at the measuring point")
-
-MIN_SIGHTINGS = 3
-"""Frames a track must be seen in before its end gives a verdict."""
 
 
 @dataclass(frozen=True)

@@ -130,6 +130,11 @@ REASON_OVERDUE_IN_WINDOW = ("no clean frame closed the evaluation window, and by
                             "{:.0f} px past the roller edge: unscored while the gate can still act")
 REASON_LINE_GAP = ("no clean frames around the measuring point (overhang {:.2f} L): frames lost or merged with a "
                    "neighbour ({} rejected)")
+MIN_SIGHTINGS = 3
+"""Frames a fillet must be seen in before any verdict on it: a track seen once or twice is a piece a split cut off
+a blob for a frame or two (at the edge, where fillets merge as they tip), a fillet's first sightings at the image
+border before a burst of lost frames, or noise, and gives none, like a tentative track in SORT-style trackers. A
+track first seen past the edge gets its unscored verdict ("no reference") on its third frame."""
 LINE_OVERHANG_FRACTION = 0.5
 """The line score is Φ_t where the rigid overhang is this fraction of the body length L (before a narrow-first
 fillet's centroid crosses the edge, about at a blunt-first one's)."""
@@ -157,6 +162,15 @@ SPILL_RATIO = 0.1
 """A window frame whose outline reaches across the flow beyond the reference's columns, or along it beyond the
 reference's extent, by more than this fraction of the reference's width or extent holds another fillet's outline:
 a fillet bending over the roller only shortens along the flow, and keeps its columns, on the belt plane."""
+FOOTPRINT_TOLERANCE_PX = 3
+"""How far (px) a window frame's outline may reach outside the fillet's own footprint riding the belt
+(:func:`outside_share`): the trailing edge it is moved by is good to a pixel or two, and a thin rim too low to
+segment on the belt shows over the floor past the edge."""
+FOREIGN_SHARE = 0.015
+"""A window frame whose scored body covers more than this share of the fillet's area outside its own footprint
+riding the belt holds a piece of another fillet, and is rejected: a fillet alone stays inside it (on the live
+line's uncrowded messy runs, 0.7 % at most of any window frame), while 3.5 % of a normal neighbour's hanging part
+joined to a stiff fillet tripled its score."""
 JOIN_PX = 2
 """Outline points this close (px, along rows or columns) to another fillet's outline touch it."""
 JOIN_MIN_POINTS = 20
@@ -378,6 +392,30 @@ def flat_overlap(reference: np.ndarray, current: np.ndarray, shift_rows: int, la
     return float(np.logical_and(*canvas).sum() / np.logical_or(*canvas).sum())
 
 
+def outside_share(reference: np.ndarray, current: np.ndarray, shift_rows: int,
+                  tolerance_px: int = FOOTPRINT_TOLERANCE_PX) -> float:
+    """The share of the reference outline's area that ``current`` covers outside the reference moved ``shift_rows``
+    down the flow and grown by ``tolerance_px``: on the belt plane a fillet bending over the roller only shortens
+    along the flow, keeping each part's column, so its outline stays inside its own footprint riding the belt, and
+    what lies outside is another fillet's."""
+    ref_mask, ref_v, ref_u = fill_rows(reference)
+    cur_mask, cur_v, cur_u = fill_rows(current)
+    ref_v += int(shift_rows) - tolerance_px
+    ref_u -= tolerance_px
+    size = 2 * tolerance_px + 1
+    grown = cv2.dilate(cv2.copyMakeBorder(ref_mask, *(tolerance_px,) * 4, cv2.BORDER_CONSTANT, value=0),
+                       cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
+    inside = np.zeros_like(cur_mask)
+    top, left = max(ref_v, cur_v), max(ref_u, cur_u)
+    bottom = min(ref_v + grown.shape[0], cur_v + cur_mask.shape[0])
+    right = min(ref_u + grown.shape[1], cur_u + cur_mask.shape[1])
+    if bottom > top and right > left:
+        inside[top - cur_v:bottom - cur_v, left - cur_u:right - cur_u] = grown[top - ref_v:bottom - ref_v,
+                                                                                left - ref_u:right - ref_u]
+    outside = np.count_nonzero(cur_mask & ~inside)
+    return outside / max(np.count_nonzero(ref_mask), 1)
+
+
 def touches(outline: np.ndarray, others: Sequence[np.ndarray]) -> bool:
     """Whether ``outline`` touches one of ``others`` (JOIN_PX) at JOIN_MIN_POINTS points or more."""
     if len(outline) < JOIN_MIN_POINTS:
@@ -495,6 +533,29 @@ class _Phase(Enum):
     DONE = "done"
 
 
+@dataclass(frozen=True)
+class _FlatFrame:
+    """A frame of the fillet lying flat before the edge: a candidate for its reference."""
+
+    points: np.ndarray
+    stamp: float
+    area: float
+    image: np.ndarray
+    joined: bool
+    """Its outline touched another fillet's (JOIN_MIN_POINTS): split from a joined blob, a guess at its outline."""
+
+
+def most_typical(frames: Sequence[_FlatFrame]) -> _FlatFrame:
+    """The flat frame whose outline overlaps the others' most (the sum of the intersections over union, each moved
+    to its trailing edge; the latest on a tie): a fillet lying flat keeps its outline, and a frame whose split from
+    a neighbour fell a few pixels off overlaps the others less."""
+    def overlap(a: _FlatFrame, b: _FlatFrame) -> float:
+        shift = int(b.points[:, 1].min()) - int(a.points[:, 1].min())
+        return flat_overlap(a.points, b.points, shift, int(max(a.points[:, 1].max() + shift, b.points[:, 1].max())))
+    scores = [sum(overlap(f, other) for other in frames if other is not f) for f in frames]
+    return frames[len(scores) - 1 - int(np.argmax(scores[::-1]))]
+
+
 class ShapeEvaluator:
     """Per-track state machine producing one :class:`ShapeResult` (see the module doc)."""
 
@@ -520,7 +581,7 @@ class ShapeEvaluator:
         self.reference_margin_px = float(reference_margin_px)
         self.line_fraction = float(line_fraction)
         self._phase = _Phase.APPROACHING
-        self._flat: list[tuple[np.ndarray, float, float, np.ndarray]] = []
+        self._flat: list[_FlatFrame] = []
         """(contour, stamp, area, image outline) of the latest flat frames."""
         self._image_reference: ShapeReference | None = None
         self._paper_trace: list[FrameScore] = []
@@ -574,7 +635,7 @@ class ShapeEvaluator:
         frames seen so far (NaN before any)."""
         if self.referenced or not self._flat:
             return self._reference_area
-        return float(np.median([area for _, _, area, _ in self._flat]))
+        return float(np.median([f.area for f in self._flat]))
 
     @property
     def referenced(self) -> bool:
@@ -597,25 +658,32 @@ class ShapeEvaluator:
         image = points if image_contour is None else np.asarray(image_contour, dtype=np.int32).reshape(-1, 2)
         if self._phase is _Phase.APPROACHING:
             if float(points[:, 1].max()) < self.edge_row - self.reference_margin_px:
-                self._remember_flat(points, stamp, image)
+                self._remember_flat(_FlatFrame(points, stamp, cv2.contourArea(points), image,
+                                               touches(points, neighbours)))
                 return None
             if not self._flat:
+                if self._sightings < MIN_SIGHTINGS:
+                    return None  # a piece split off a blob past the edge lives a frame or two
                 return self._finish(STATUS_UNSCORED, REASON_STARTED_PAST_EDGE)
             if not self._lock_reference():
                 return self._finish(STATUS_UNSCORED, REASON_DEGENERATE)
             self._phase = _Phase.REFERENCED
         return self._window_frame(points, stamp, image, neighbours)
 
-    def _remember_flat(self, points: np.ndarray, stamp: float, image: np.ndarray) -> None:
-        self._flat = (self._flat + [(points, stamp, cv2.contourArea(points), image)])[-FLAT_HISTORY:]
-        self._see_trailing(int(points[:, 1].min()), stamp)
-        self._approach.append((stamp, float(points[:, 1].max())))
+    def _remember_flat(self, frame: _FlatFrame) -> None:
+        self._flat = (self._flat + [frame])[-FLAT_HISTORY:]
+        self._see_trailing(int(frame.points[:, 1].min()), frame.stamp)
+        self._approach.append((frame.stamp, float(frame.points[:, 1].max())))
 
     def _lock_reference(self) -> bool:
-        """The reference from the latest flat outline not grown by a merge; False if it is degenerate."""
-        typical = float(np.median([area for _, _, area, _ in self._flat]))
-        clean = [f for f in self._flat if f[2] <= MERGE_GROWTH * typical]
-        points, self._reference_stamp, self._reference_area, image = (clean or self._flat)[-1]
+        """The reference from the latest flat outline not grown by a merge; False if it is degenerate. When that
+        outline was split from a neighbour's (where a split falls is a guess, and a reference a few pixels off
+        raises every frame's Φ_t), the most typical of the flat outlines instead (:func:`most_typical`)."""
+        typical = float(np.median([f.area for f in self._flat]))
+        clean = [f for f in self._flat if f.area <= MERGE_GROWTH * typical] or self._flat
+        chosen = most_typical(clean) if clean[-1].joined else clean[-1]
+        points, image = chosen.points, chosen.image
+        self._reference_stamp, self._reference_area = chosen.stamp, chosen.area
         self._reference = make_reference(points, self.tip_ratio)
         self._image_reference = self._reference if image is points else make_reference(image, self.tip_ratio)
         self._reference_contour = points
@@ -630,18 +698,18 @@ class ShapeEvaluator:
         reference = self._reference
         trailing = int(points[:, 1].min())
         if self._merged(points, trailing, stamp) or self._spills(points):
-            self._rejected += 1
-            if self._trace and not self._closed:
-                self._note_gap()
-            return None
+            return self._reject()
         self._see_trailing(trailing, stamp)
         if trailing + reference.length_px < self.edge_row:
             return None  # the rigid body front has not reached the edge yet: the window is not open
+        body = clip_body(points, trailing, reference.length_px)
+        if self._foreign(body, trailing):
+            return self._reject()
         if not self._closed:
             self._note_gap()
         overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
         joined = touches(points, neighbours)
-        frame = self._score(self._reference, clip_body(points, trailing, reference.length_px), stamp, overhang, joined)
+        frame = self._score(self._reference, body, stamp, overhang, joined)
         (self._extra if self._closed else self._trace).append(frame)
         self._contours.append(points)
         if not self._closed:
@@ -653,6 +721,18 @@ class ShapeEvaluator:
         if self._closed and self._confirmed():
             return self._finish_line()
         return None
+
+    def _reject(self) -> None:
+        """Count a window frame that is not this fillet alone; frames lost inside the window show as a gap."""
+        self._rejected += 1
+        if self._trace and not self._closed:
+            self._note_gap()
+
+    def _foreign(self, body: np.ndarray, trailing: int) -> bool:
+        """Whether the scored body covers more than FOREIGN_SHARE of the fillet's area outside its own footprint
+        riding the belt (:func:`outside_share`): a neighbour's outline joined to it."""
+        shift = trailing - int(self._reference_contour[:, 1].min())
+        return len(body) >= 3 and outside_share(self._reference_contour, body, shift) > FOREIGN_SHARE
 
     def _confirmed(self) -> bool:
         """Whether a frame has followed the first one at or past the measuring point: the rising envelope caps that
@@ -754,7 +834,7 @@ class ShapeEvaluator:
             return None
         if self._reference is None and not self._front_past_edge(stamp):
             return None  # the centroid lies behind the front: no outline to measure while the front is short of it
-        reference = self._reference or (make_reference(self._flat[-1][0], self.tip_ratio) if self._flat else None)
+        reference = self._reference or (make_reference(self._flat[-1].points, self.tip_ratio) if self._flat else None)
         if reference is None:
             return None
         speed = self._speed_px_s()
