@@ -217,13 +217,16 @@ def test_a_fillet_whose_track_went_on_with_its_lane_mate_gets_one_verdict_from_t
 
 
 def beside_a_neighbour(grader: FilletGrader, shapes, lost: frozenset[int] = frozenset()) -> GradedFillet:
-    """Track 1's verdict when track 2's outline lies against its right side past the edge in every frame but the
+    """Track 1's verdict when track 2's outline, a band beside its footprint (never inside it, as no two fillets'
+    footprints overlap), lies against its right side over the 30 rows before the edge in every frame but the
     ``lost`` ones (no frame came)."""
     out = []
     for i, contour in enumerate(shapes):
         if i in lost:
             continue
-        neighbour = contour[(contour[:, 0] > 300) & (contour[:, 1] >= EDGE - 4)] + np.array([2, 0], np.int32)
+        side = contour[(contour[:, 0] > 300) & (contour[:, 1] >= EDGE - 30) & (contour[:, 1] <= EDGE)]
+        side = side[np.argsort(side[:, 1], kind="stable")] + np.array([2, 0], np.int32)
+        neighbour = np.concatenate([side, side[::-1] + np.array([40, 0], np.int32)])
         observed = [TrackObservation(1, 0, contour)] + ([TrackObservation(2, 1, neighbour)] if len(neighbour) else [])
         out += grader.on_tracks(i / FPS, observed)
     (verdict,) = [v for v in out if v.fillet_id == 1]

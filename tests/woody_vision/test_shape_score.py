@@ -31,12 +31,14 @@ from woody_vision.shape_score import (
     STATUS_UNSCORED,
     FrameScore,
     ShapeEvaluator,
+    ShapeResult,
     aspect_ratio,
     clip_body,
     extrapolate_at,
     fill_rows,
     flat_overlap,
     interpolate_at,
+    intruding_share,
     leading_cut_rows,
     leading_end,
     make_reference,
@@ -549,10 +551,45 @@ def test_a_window_frame_holding_a_neighbours_piece_within_its_columns_and_length
     assert result.line_phi == pytest.approx(plain.line_phi)
 
 
+def cut_by_a_neighbour(contour: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The contour with the right side of its part past the edge handed to a neighbour by a split of their joined
+    blob, and that neighbour's outline (its hanging part joined with the piece); no neighbour before the edge."""
+    mask = filled(contour)
+    stolen = np.zeros_like(mask)
+    stolen[int(EDGE) + 1:, 312:] = 255
+    piece = cv2.bitwise_and(mask, stolen)
+    if cv2.countNonZero(piece) < 20:
+        return contour, []
+    neighbour = cv2.bitwise_or(piece, cv2.bitwise_and(stolen, cv2.rectangle(np.zeros_like(mask), (331, int(EDGE) + 1),
+                                                                            (370, 800), 255, -1)))
+    return outline_of(cv2.bitwise_and(mask, cv2.bitwise_not(stolen))), [outline_of(neighbour)]
+
+
+def test_a_frame_a_neighbours_outline_cut_a_piece_from_is_rejected_near_the_measuring_point():
+    """The split of a joined blob gave the neighbour a piece of this fillet's hanging part: this fillet's outline
+    misses it (its Φ_t rises as if it bent) and the neighbour's reaches into this fillet's footprint, which no
+    fillet's own outline does. Such frames never set the line score."""
+    flat, contours = translating(90), translating(90, bend=drooping)
+    _, plain, _ = run_evaluator(contours)
+    assert intruding_share(flat[60], hugging(flat[60], EDGE - 30), 0, 800) == 0.0, "a neighbour beside is none"
+    def graded(with_neighbours: bool) -> ShapeResult:
+        evaluator, results = ShapeEvaluator(EDGE), []
+        for i, contour in enumerate(contours):
+            own, neighbours = cut_by_a_neighbour(contour)
+            results.append(evaluator.update(own, i / FPS, neighbours=neighbours if with_neighbours else []))
+        (result,) = [r for r in results if r is not None]
+        return result
+    assert graded(False).line_phi > 1.2 * plain.line_phi, "precondition: the cut outline scores as if it bent more"
+    cut = graded(True)
+    assert cut.status == STATUS_UNSCORED and cut.rejected_frames > plain.rejected_frames
+
+
 def hugging(contour: np.ndarray, first_row: float) -> np.ndarray:
-    """The points of a neighbour's outline lying against the contour's right side from ``first_row`` on."""
+    """A neighbour's outline lying against the contour's right side from ``first_row`` on: a 40 px band whose left
+    side follows the contour's 2 px away."""
     side = contour[(contour[:, 0] > 300) & (contour[:, 1] >= first_row)]
-    return side + np.array([2, 0], np.int32)
+    side = side[np.argsort(side[:, 1], kind="stable")] + np.array([2, 0], np.int32)
+    return np.concatenate([side, side[::-1] + np.array([40, 0], np.int32)])
 
 
 def test_touching_is_a_shared_boundary_of_enough_points():
@@ -568,7 +605,9 @@ def test_frames_split_from_a_neighbour_at_the_measuring_point_are_scored_and_mar
     contours = translating(90, bend=drooping)
     _, plain, _ = run_evaluator(contours)
     evaluator = ShapeEvaluator(EDGE)
-    results = [evaluator.update(c, i / FPS, neighbours=[hugging(c, EDGE - 4)]) for i, c in enumerate(contours)]
+    flat = translating(90)  # the neighbour lies beside the fillet's footprint, never inside it
+    results = [evaluator.update(c, i / FPS, neighbours=[hugging(f, EDGE - 30)])
+               for i, (c, f) in enumerate(zip(contours, flat))]
     (joined,) = [r for r in results if r is not None]
     assert joined.joined_at_line and not plain.joined_at_line
     assert joined.line_phi == pytest.approx(plain.line_phi) and joined.rejected_frames == plain.rejected_frames

@@ -70,7 +70,11 @@ the flow by more than ``LATERAL_JUMP_RATIO`` × the reference's width is
 another fillet's blob (a track that switched fillets after a merge); one that
 reaches beyond the reference's columns or length by more than ``SPILL_RATIO``
 holds another fillet's outline (on the belt plane a fillet bending over the
-roller only shortens along the flow). Each is rejected, never scored, and
+roller only shortens along the flow). One whose scored body covers more than
+``FOREIGN_SHARE`` of the fillet's area outside its own footprint riding the
+belt holds a piece of another fillet (:func:`outside_share`), and near the
+measuring point one into whose footprint a neighbour's outline reaches that
+far lost a piece to it (:func:`intruding_share`). Each is rejected, never scored, and
 counted. A frame whose outline touches another fillet's is scored and marked
 joined (``JOIN_MIN_POINTS``): the split between them is a guess, and the
 grader decides what such a score may decide. If the frames left around the
@@ -170,7 +174,9 @@ FOREIGN_SHARE = 0.015
 """A window frame whose scored body covers more than this share of the fillet's area outside its own footprint
 riding the belt holds a piece of another fillet, and is rejected: a fillet alone stays inside it (on the live
 line's uncrowded messy runs, 0.7 % at most of any window frame), while 3.5 % of a normal neighbour's hanging part
-joined to a stiff fillet tripled its score."""
+joined to a stiff fillet tripled its score. Within JOIN_SPAN of the measuring point a frame is rejected too when a
+neighbour's outline covers this share inside the fillet's footprint: the split gave the neighbour a piece of it
+(a stiff fillet missing a piece of its hanging part scored 20 against a cut of 5)."""
 JOIN_PX = 2
 """Outline points this close (px, along rows or columns) to another fillet's outline touch it."""
 JOIN_MIN_POINTS = 20
@@ -398,22 +404,44 @@ def outside_share(reference: np.ndarray, current: np.ndarray, shift_rows: int,
     down the flow and grown by ``tolerance_px``: on the belt plane a fillet bending over the roller only shortens
     along the flow, keeping each part's column, so its outline stays inside its own footprint riding the belt, and
     what lies outside is another fillet's."""
+    inside, total, reference_area = _in_footprint(reference, current, shift_rows, tolerance_px)
+    return (total - inside) / reference_area
+
+
+def intruding_share(reference: np.ndarray, other: np.ndarray, shift_rows: int, last_row: int,
+                    tolerance_px: int = FOOTPRINT_TOLERANCE_PX) -> float:
+    """The share of the reference outline's area that another fillet's outline ``other`` covers, up to row
+    ``last_row`` (this fillet's own leading edge now), inside the reference moved ``shift_rows`` down the flow and
+    shrunk by ``tolerance_px``. Fillets' footprints never overlap, so a neighbour whose outline reaches into this
+    one's beside it holds a piece of it (the split of their joined blob gave it one), and this fillet's outline
+    misses that piece. Ahead of the fillet's own leading edge the lane-mate hanging ahead, drawn back towards the
+    edge, may lie where this fillet's rigid footprint reaches past the edge: that is not counted."""
+    limited = np.asarray(other).reshape(-1, 2).copy()
+    limited[:, 1] = np.minimum(limited[:, 1], last_row)
+    inside, _, reference_area = _in_footprint(reference, limited, shift_rows, -tolerance_px)
+    return inside / reference_area
+
+
+def _in_footprint(reference: np.ndarray, outline: np.ndarray, shift_rows: int,
+                  grow_px: int) -> tuple[int, int, int]:
+    """(pixels of ``outline`` inside the reference moved ``shift_rows`` and grown by ``grow_px`` (shrunk when
+    negative), pixels of ``outline``, pixels of the reference)."""
     ref_mask, ref_v, ref_u = fill_rows(reference)
-    cur_mask, cur_v, cur_u = fill_rows(current)
-    ref_v += int(shift_rows) - tolerance_px
-    ref_u -= tolerance_px
-    size = 2 * tolerance_px + 1
-    grown = cv2.dilate(cv2.copyMakeBorder(ref_mask, *(tolerance_px,) * 4, cv2.BORDER_CONSTANT, value=0),
-                       cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
-    inside = np.zeros_like(cur_mask)
+    cur_mask, cur_v, cur_u = fill_rows(outline)
+    pad = abs(grow_px)
+    ref_v += int(shift_rows) - pad
+    ref_u -= pad
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * pad + 1, 2 * pad + 1))
+    padded = cv2.copyMakeBorder(ref_mask, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=0)
+    footprint = cv2.dilate(padded, kernel) if grow_px >= 0 else cv2.erode(padded, kernel)
     top, left = max(ref_v, cur_v), max(ref_u, cur_u)
-    bottom = min(ref_v + grown.shape[0], cur_v + cur_mask.shape[0])
-    right = min(ref_u + grown.shape[1], cur_u + cur_mask.shape[1])
+    bottom = min(ref_v + footprint.shape[0], cur_v + cur_mask.shape[0])
+    right = min(ref_u + footprint.shape[1], cur_u + cur_mask.shape[1])
+    inside = 0
     if bottom > top and right > left:
-        inside[top - cur_v:bottom - cur_v, left - cur_u:right - cur_u] = grown[top - ref_v:bottom - ref_v,
-                                                                                left - ref_u:right - ref_u]
-    outside = np.count_nonzero(cur_mask & ~inside)
-    return outside / max(np.count_nonzero(ref_mask), 1)
+        inside = np.count_nonzero(cur_mask[top - cur_v:bottom - cur_v, left - cur_u:right - cur_u]
+                                  & footprint[top - ref_v:bottom - ref_v, left - ref_u:right - ref_u])
+    return inside, np.count_nonzero(cur_mask), max(np.count_nonzero(ref_mask), 1)
 
 
 def touches(outline: np.ndarray, others: Sequence[np.ndarray]) -> bool:
@@ -703,11 +731,12 @@ class ShapeEvaluator:
         if trailing + reference.length_px < self.edge_row:
             return None  # the rigid body front has not reached the edge yet: the window is not open
         body = clip_body(points, trailing, reference.length_px)
-        if self._foreign(body, trailing):
+        overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
+        near_line = abs(overhang - self.line_fraction) <= JOIN_SPAN
+        if self._foreign(body, trailing) or (near_line and self._intruded(neighbours, points)):
             return self._reject()
         if not self._closed:
             self._note_gap()
-        overhang = (trailing + reference.length_px - self.edge_row) / reference.length_px
         joined = touches(points, neighbours)
         frame = self._score(self._reference, body, stamp, overhang, joined)
         (self._extra if self._closed else self._trace).append(frame)
@@ -733,6 +762,15 @@ class ShapeEvaluator:
         riding the belt (:func:`outside_share`): a neighbour's outline joined to it."""
         shift = trailing - int(self._reference_contour[:, 1].min())
         return len(body) >= 3 and outside_share(self._reference_contour, body, shift) > FOREIGN_SHARE
+
+    def _intruded(self, neighbours: Sequence[np.ndarray], points: np.ndarray) -> bool:
+        """Whether another fillet's outline covers more than FOREIGN_SHARE of this one's area inside its footprint
+        riding the belt, beside its outline ``points`` (:func:`intruding_share`): the split of their joined blob cut
+        a piece off this one."""
+        shift = int(points[:, 1].min()) - int(self._reference_contour[:, 1].min())
+        leading = int(points[:, 1].max())
+        return any(intruding_share(self._reference_contour, other, shift, leading) > FOREIGN_SHARE
+                   for other in neighbours if len(other) >= 3)
 
     def _confirmed(self) -> bool:
         """Whether a frame has followed the first one at or past the measuring point: the rising envelope caps that

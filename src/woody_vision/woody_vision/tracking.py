@@ -152,7 +152,8 @@ def _motion(tracks: Sequence[Track], stamp: float) -> tuple[np.ndarray, np.ndarr
 
 
 class CentroidTracker:
-    """Nearest-centroid multi-object tracker with stable integer ids."""
+    """Multi-object tracker with stable integer ids, each fillet predicted by the end of its blob that rides the belt
+    (the name keeps the paper's nearest-centroid tracker it grew from)."""
 
     def __init__(
         self,
