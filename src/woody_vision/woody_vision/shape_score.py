@@ -569,8 +569,14 @@ class _FlatFrame:
     stamp: float
     area: float
     image: np.ndarray
-    joined: bool
-    """Its outline touched another fillet's (JOIN_MIN_POINTS): split from a joined blob, a guess at its outline."""
+    neighbours: Sequence[np.ndarray]
+    """The other fillets' outlines of the same frame."""
+
+    @property
+    def joined(self) -> bool:
+        """Its outline touched another fillet's (JOIN_MIN_POINTS): split from a joined blob, a guess at its outline.
+        Asked of one frame only, when the reference is locked."""
+        return touches(self.points, self.neighbours)
 
 
 def most_typical(frames: Sequence[_FlatFrame]) -> _FlatFrame:
@@ -686,8 +692,7 @@ class ShapeEvaluator:
         image = points if image_contour is None else np.asarray(image_contour, dtype=np.int32).reshape(-1, 2)
         if self._phase is _Phase.APPROACHING:
             if float(points[:, 1].max()) < self.edge_row - self.reference_margin_px:
-                self._remember_flat(_FlatFrame(points, stamp, cv2.contourArea(points), image,
-                                               touches(points, neighbours)))
+                self._remember_flat(_FlatFrame(points, stamp, cv2.contourArea(points), image, tuple(neighbours)))
                 return None
             if not self._flat:
                 if self._sightings < MIN_SIGHTINGS:
