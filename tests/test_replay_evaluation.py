@@ -31,7 +31,7 @@ def test_each_replayed_fillet_has_its_live_verdict_and_score():
         from replay_evaluation import replay_run
     finally:
         sys.path.remove(str(REPO / "tools"))
-    replayed = {str(row["sim_id"]): row for row in replay_run(SAMPLE, split_by_tracks=False)}
+    replayed = {str(row["sim_id"]): row for row in replay_run(SAMPLE, split_by_tracks=True)}
     for row in read_csv(SAMPLE / "verdicts.csv"):
         again = replayed[row["sim_id"]]
         assert again["verdict"] == row["verdict"]

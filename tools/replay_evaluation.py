@@ -10,7 +10,7 @@ instead of 25; the live grid stays the figure the docs report. For the
 straight-down default camera and the grader's default roller edge, which
 `woody evaluate` uses.
 
-    .venv/bin/python tools/replay_evaluation.py evaluate-out [--split-by-tracks]
+    .venv/bin/python tools/replay_evaluation.py evaluate-out [--no-split-by-tracks]
 """
 
 from __future__ import annotations
@@ -86,7 +86,8 @@ def replay_run(run: Path, split_by_tracks: bool) -> list[dict]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder", type=Path, help="a woody evaluate --out folder")
-    parser.add_argument("--split-by-tracks", action="store_true", help="the segmenter's split_by_tracks")
+    parser.add_argument("--no-split-by-tracks", dest="split_by_tracks", action="store_false",
+                        help="the segmenter's split_by_tracks:=false")
     args = parser.parse_args()
     rows = []
     for run in sorted((args.folder / RUNS_DIR).iterdir()):

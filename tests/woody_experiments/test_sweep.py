@@ -6,6 +6,7 @@ import csv
 import dataclasses
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -94,6 +95,9 @@ def _check_report(out):
     for paper_figure in ("0.520", "0.783", "19.12 ± 5.67", "5.40 ± 2.54", "19.06 ± 5.53", "5.28 ± 2.56"):
         assert paper_figure in md
     assert "evaluations/min" in md
+    # the grade stiffness by stiffness: every run of k = 0 graded one way or another
+    assert "Three classes, tidy line, by stiffness" in md
+    assert re.search(r"\| 0 \| normal \| \d+ \| \d+ \| \d+ \| [\d.]+ % \(\d+/2;", md)
     # the report grades with the --calibration file and names the mesh set from its provenance
     assert f"Φ threshold {THRESHOLD:g}" in md
     assert f"`{MESHES}`; 2 of these meshes are in that calibration set" in md

@@ -466,7 +466,7 @@ def test_a_wide_fillet_reading_thicker_over_the_roller_crown_is_not_split_along_
     assert blob.area_px > 0.95 * np.count_nonzero(inside)
 
 
-SPLIT_BY_TRACKS = SegmentationParams(split_by_tracks=True)
+NO_SPLIT_BY_TRACKS = SegmentationParams(split_by_tracks=False)
 
 
 def rectangle(u0: int, v0: int, width: int, rows: int) -> np.ndarray:
@@ -483,8 +483,8 @@ def test_a_blob_holding_two_tracked_fillets_is_split_where_their_priors_lie():
     height = np.full(mask.shape, 0.02, np.float32)
     assert len(segment_mask(mask, height, SegmentationParams())) == 1
     moved = [left + [0, 4], right + [2, -3]]  # predictions a few pixels off
-    assert len(segment_mask(mask, height, SegmentationParams(), moved)) == 1  # the split is the user's choice
-    split = segment_mask(mask, height, SPLIT_BY_TRACKS, moved)
+    assert len(segment_mask(mask, height, NO_SPLIT_BY_TRACKS, moved)) == 1  # the split can be turned off
+    split = segment_mask(mask, height, SegmentationParams(), moved)
     assert len(split) == 2
     by_column = sorted(split, key=lambda b: b.centroid[0])
     assert abs(by_column[0].centroid[0] - 119.5) < 3 and abs(by_column[1].centroid[0] - 159.5) < 3
@@ -497,12 +497,12 @@ def test_a_slivers_prior_two_priors_of_one_fillet_or_the_fillet_ahead_never_spli
     cv2.fillPoly(mask, [whole], 255)
     height = np.full(mask.shape, 0.02, np.float32)
     sliver = rectangle(140, 60, 15, 25)
-    assert len(segment_mask(mask, height, SPLIT_BY_TRACKS, [whole, sliver])) == 1
+    assert len(segment_mask(mask, height, SegmentationParams(), [whole, sliver])) == 1
     halves = [rectangle(100, 50, 30, 100), rectangle(130, 50, 30, 100)]  # no growth past the larger: one fillet
-    assert len(segment_mask(mask, height, SPLIT_BY_TRACKS, [whole, *halves])) == 1
-    assert len(segment_mask(mask, height, SPLIT_BY_TRACKS, [rectangle(10, 10, 20, 20)] * 2)) == 1
+    assert len(segment_mask(mask, height, SegmentationParams(), [whole, *halves])) == 1
+    assert len(segment_mask(mask, height, SegmentationParams(), [rectangle(10, 10, 20, 20)] * 2)) == 1
     tip_to_tail = np.zeros((300, 300), np.uint8)  # a fillet reaching the one that hangs ahead of it in its lane
     cv2.fillPoly(tip_to_tail, [rectangle(100, 20, 50, 100), rectangle(100, 120, 50, 100)], 255)
     ahead, behind = rectangle(100, 125, 50, 100), rectangle(100, 15, 50, 100)
-    assert len(segment_mask(tip_to_tail, np.full(tip_to_tail.shape, 0.02, np.float32), SPLIT_BY_TRACKS,
+    assert len(segment_mask(tip_to_tail, np.full(tip_to_tail.shape, 0.02, np.float32), SegmentationParams(),
                             [ahead, behind])) == 1

@@ -403,7 +403,22 @@ def _line_grade(rows: list[dict], rules, fitted, provenance: dict) -> list[str]:
                      f"{share_text(summary.grade_right, summary.grade_total)} |")
     for condition in dict.fromkeys(r.condition for r in runs):
         L += _confusion(condition, line_grade.summarise([r for r in runs if r.condition == condition]))
-    return L
+    return L + _grade_by_k([r for r in runs if r.condition == TIDY])
+
+
+def _grade_by_k(runs: list) -> list[str]:
+    """The tidy line's grade stiffness by stiffness: where the three classes' scores overlap."""
+    if not runs:
+        return []
+    L = ["Three classes, tidy line, by stiffness (runs graded each way: where the classes' scores overlap):\n",
+         "| k | truth | " + " | ".join(line_grade.GRADES) + " | right |", "|---|---|---|---|---|---|"]
+    for k in sorted({r.k for r in runs}):
+        of_k = [r for r in runs if r.k == k]
+        truth = line_grade.true_grade(k)
+        counts = [sum(r.grade == g for r in of_k) for g in line_grade.GRADES]
+        L.append(f"| {k:g} | {truth} | " + " | ".join(map(str, counts)) + " | "
+                 f"{share_text(sum(r.grade == truth for r in of_k), len(of_k))} |")
+    return L + [""]
 
 
 def _range_text(fitted) -> str:

@@ -117,11 +117,12 @@ class SegmentationParams:
     color_search_px: int = 8
     """Colour refines the outline only within this distance (px) of the depth mask: depth decides where a fillet
     is, so a stain, glare or shadow elsewhere never becomes one."""
-    split_by_tracks: bool = False
+    split_by_tracks: bool = True
     """Split a blob holding the predicted outlines of several tracked fillets side by side into them
-    (:func:`_split_by_priors`). Off by default: on the live line it scores most fillets that merge with a
-    neighbour at the edge (unscored 1.1 to 0.1 %), but the split boundary of two touching fillets is a few pixels
-    off, and more woody fillets pass (13 against 9 of 1,152, docs/results.md)."""
+    (:func:`_split_by_priors`): fillets that merge with a neighbour as they tip over the edge are scored instead
+    of unscored. The split boundary of two touching fillets is a few pixels off; the grader rejects a window frame
+    a neighbour's piece reaches into, so no woody fillet passed on it (docs/results.md, "Splitting merged fillets
+    by their tracks")."""
 
     def for_camera(self, k, camera_height_m: float, max_width_m: float = MAX_FILLET_WIDTH_M,
                    max_length_m: float = MAX_FILLET_LENGTH_M,
