@@ -416,8 +416,8 @@ def _grade_by_k(runs: list) -> list[str]:
         of_k = [r for r in runs if r.k == k]
         truth = line_grade.true_grade(k)
         counts = [sum(r.grade == g for r in of_k) for g in line_grade.GRADES]
-        L.append(f"| {k:g} | {truth} | " + " | ".join(map(str, counts)) + " | "
-                 f"{share_text(sum(r.grade == truth for r in of_k), len(of_k))} |")
+        right = counts[line_grade.GRADES.index(truth)]
+        L.append(f"| {k:g} | {truth} | " + " | ".join(map(str, counts)) + f" | {share_text(right, len(of_k))} |")
     return L + [""]
 
 
