@@ -29,7 +29,7 @@ from woody_common.line import (
     TOP_EDGE_OFFSET_M,
 )
 from woody_common.stamps import stamp_to_seconds
-from woody_experiments.live_evaluation import RUNS_DIR, tally, woody_not_diverted
+from woody_experiments.live_evaluation import RUNS_DIR, failures_by_reason, tally, woody_not_diverted
 from woody_experiments.messages import spawn_from_msg, verdict_from_msg
 from woody_experiments.run_report import join
 from woody_vision.camera_model import LaneLayout, belt_outline, edge_row
@@ -96,6 +96,8 @@ def main() -> None:
     t = tally(rows)
     print(f"{t.runs} runs, {t.fillets} fillets: right {t.right}, unscored {t.unscored}, missing {t.missing}, "
           f"extra {t.extra}, woody not diverted {t.woody_not_diverted} of {t.woody}")
+    for reason, failed in failures_by_reason(rows):
+        print(f"  {len(failed):4d}  {reason}")
     for row in woody_not_diverted(rows):
         print(f"  woody not diverted: {row['run']} fillet {row['fillet_id']} lane {row['lane']} {row['mesh']} "
               f"score {row['score']} cut {row['threshold']}")

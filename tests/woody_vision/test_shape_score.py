@@ -265,7 +265,7 @@ def test_window_opens_at_the_rigid_front_and_closes_at_the_virtual_centroid():
     closes = next(i for i, t in enumerate(trailing) if t + reference.centroid_offset_px >= EDGE)
     assert opens > reference_index + 2 and closes > opens + 2
     index, result, _ = run_evaluator(flat)  # decided on the frame after it closes, which confirms the closing one
-    assert index == closes + 1 and result.stamp == pytest.approx((closes + 1) / FPS)
+    assert index == closes + 1 and (closes - 1) / FPS < result.stamp <= closes / FPS  # when its centroid crossed
     assert result.frames == closes - opens + 1
     assert [f.stamp for f in result.trace] == pytest.approx([i / FPS for i in range(opens, closes + 1)])
     assert result.reference_stamp == pytest.approx(reference_index / FPS)
@@ -352,19 +352,25 @@ def test_a_degenerate_frame_in_the_window_is_rejected_not_scored():
     assert result.phi == pytest.approx(plain.phi, abs=1e-9)
 
 
-def test_a_burst_of_frames_lost_at_the_edge_leaves_the_fillet_unscored_not_misgraded():
-    contours = translating(80)
-    closes, plain, _ = run_evaluator(contours)
-    stamps = list(range(80))
-    kept = [i for i in stamps if not closes - 1 <= i <= closes + 3]  # 5 frames lost: the close comes 4 frames late
-    evaluator = ShapeEvaluator(EDGE)
-    results = [evaluator.update(contours[i], i / FPS) for i in kept]
-    (late,) = [r for r in results if r is not None]
-    assert late.status == STATUS_UNSCORED and late.reason.startswith("frames lost at the roller edge")
-    one_lost = ShapeEvaluator(EDGE)  # one frame lost just before the close: still scored
-    results = [one_lost.update(contours[i], i / FPS) for i in stamps if i != closes]
-    (scored,) = [r for r in results if r is not None]
-    assert plain.status == scored.status == STATUS_SCORED
+def first_frame_past_the_measuring_point(result: ShapeResult) -> int:
+    """The index of the first frame of ``result``'s window at or past its measuring point."""
+    frames = result.trace + result.extra_trace
+    return round(next(f for f in frames if f.overhang >= result.line_fraction).stamp * FPS)
+
+
+def test_a_burst_of_frames_lost_at_the_edge_leaves_phi_absent_and_the_line_score_read_around_its_point():
+    contours = translating(80, bend=drooping)
+    _, plain, _ = run_evaluator(contours)
+    past = first_frame_past_the_measuring_point(plain)
+    assert round(plain.trace[-1].stamp * FPS) == past  # this teardrop's centroid crosses the edge just past the point
+    late = run_without(contours, set(range(past, past + 5)))  # 5 frames lost: the close comes 4 frames late
+    assert late.status == STATUS_SCORED and late.reason.startswith("phi absent: frames lost at the roller edge")
+    assert math.isnan(late.phi) and not late.window_closed
+    assert late.line_phi == pytest.approx(plain.line_phi, rel=0.05)  # read on the two frames before the point
+    blind = run_without(contours, set(range(past - 3, past + 5)))  # the frames around the point lost too
+    assert blind.status == STATUS_UNSCORED and blind.reason.startswith("frames lost at the roller edge")
+    one_lost = run_without(contours, {past})  # one frame lost at the close: the window closes on the next
+    assert plain.status == one_lost.status == STATUS_SCORED and one_lost.window_closed
 
 
 def test_unscored_when_the_track_starts_past_the_edge_once_seen_three_times():
@@ -386,7 +392,7 @@ def test_unscored_when_the_track_is_lost_in_the_window_or_before_the_body_reache
         assert evaluator.update(contours[i], i / FPS) is None
     result = evaluator.finish()
     assert result.status == STATUS_UNSCORED and result.reason == REASON_LOST_IN_WINDOW
-    assert result.frames == 2 and result.stamp == pytest.approx((opens + 1) / FPS)
+    assert result.frames == 2 and result.stamp == pytest.approx(plain.stamp)  # when, by its speed, it crosses
     assert evaluator.finish() is None
 
     referenced = ShapeEvaluator(EDGE)  # reference locked, body front not at the edge yet
@@ -410,6 +416,15 @@ def test_a_fillet_lost_in_its_window_is_overdue_once_its_centroid_is_past_the_ed
     assert result.status == STATUS_UNSCORED and result.reason.startswith("no clean frame closed the evaluation window")
     assert abs(result.stamp - plain.trace[-1].stamp) <= 1 / FPS  # stamped when its centroid was due at the edge
     assert evaluator.update(contours[closes + 4], (closes + 4) / FPS) is None and evaluator.finish() is None
+
+    bent = translating(80, bend=drooping)  # seen past its measuring point, then lost before the close
+    _, whole, _ = run_evaluator(bent)
+    seen = ShapeEvaluator(EDGE)
+    for i in range(first_frame_past_the_measuring_point(whole)):
+        seen.update(bent[i], i / FPS)
+    scored = seen.overdue((closes + 3) / FPS)
+    assert scored.status == STATUS_SCORED and scored.reason.startswith("phi absent: no clean frame closed")
+    assert scored.line_phi == pytest.approx(whole.line_phi, rel=0.05) and math.isnan(scored.phi)
 
     approaching = ShapeEvaluator(EDGE)  # lost on the belt, long before its reference was locked
     for i in range(5):
@@ -551,16 +566,22 @@ def test_a_window_frame_holding_a_neighbours_piece_within_its_columns_and_length
     assert result.line_phi == pytest.approx(plain.line_phi)
 
 
+NEIGHBOUR_COLUMN = 331
+"""The first image column of the neighbour beside the fillet past the edge (the fillet's right side lies at 330)."""
+
+
 def cut_by_a_neighbour(contour: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
     """The contour with the right side of its part past the edge handed to a neighbour by a split of their joined
-    blob, and that neighbour's outline (its hanging part joined with the piece); no neighbour before the edge."""
+    blob, and that neighbour's outline (its hanging part joined with the piece); no neighbour before the edge, and
+    nothing handed over while the fillet's part past the edge is too narrow to reach the neighbour's."""
     mask = filled(contour)
     stolen = np.zeros_like(mask)
     stolen[int(EDGE) + 1:, 312:] = 255
     piece = cv2.bitwise_and(mask, stolen)
-    if cv2.countNonZero(piece) < 20:
+    if cv2.countNonZero(piece) < 20 or not piece[:, NEIGHBOUR_COLUMN - 1].any():
         return contour, []
-    neighbour = cv2.bitwise_or(piece, cv2.bitwise_and(stolen, cv2.rectangle(np.zeros_like(mask), (331, int(EDGE) + 1),
+    neighbour = cv2.bitwise_or(piece, cv2.bitwise_and(stolen, cv2.rectangle(np.zeros_like(mask),
+                                                                            (NEIGHBOUR_COLUMN, int(EDGE) + 1),
                                                                             (370, 800), 255, -1)))
     return outline_of(cv2.bitwise_and(mask, cv2.bitwise_not(stolen))), [outline_of(neighbour)]
 
@@ -579,9 +600,13 @@ def test_a_frame_a_neighbours_outline_cut_a_piece_from_is_rejected_near_the_meas
             results.append(evaluator.update(own, i / FPS, neighbours=neighbours if with_neighbours else []))
         (result,) = [r for r in results if r is not None]
         return result
-    assert graded(False).line_phi > 1.2 * plain.line_phi, "precondition: the cut outline scores as if it bent more"
+    assert graded(False).phi > 1.2 * plain.phi, "precondition: the cut outline scores as if it bent more"
     cut = graded(True)
-    assert cut.status == STATUS_UNSCORED and cut.rejected_frames > plain.rejected_frames
+    first_cut = next(i for i, c in enumerate(contours) if cut_by_a_neighbour(c)[1])
+    assert cut.rejected_frames >= 5 > plain.rejected_frames
+    assert cut.status == STATUS_SCORED and cut.reason.startswith("phi absent")  # no clean frame closed the window
+    assert cut.line_stamp < first_cut / FPS  # read on the frames before the neighbour cut a piece
+    assert cut.line_phi == pytest.approx(plain.line_phi, rel=0.05)
 
 
 def hugging(contour: np.ndarray, first_row: float) -> np.ndarray:

@@ -18,7 +18,8 @@ LABELS = {"normal": FilletVerdict.CLASS_NORMAL, "woody": FilletVerdict.CLASS_WOO
 
 
 def verdict_message(fillet: GradedFillet, rules: GradingRules, frame_id: str, now: float) -> FilletVerdict:
-    """The fillet's verdict, stamped when its window closed (``now``, the grader's sim time, when it never opened)."""
+    """The fillet's verdict, stamped when its centroid crossed the roller edge (``ShapeResult.stamp``; ``now``, the
+    grader's sim time, when the result has none)."""
     shape, nan = fillet.shape, math.nan
     conditions = fillet.conditions or FilletConditions(nan)
     cut = rules.threshold.at(conditions)
