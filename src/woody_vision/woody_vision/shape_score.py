@@ -22,10 +22,8 @@ the leading edge is the contour's max v, the trailing edge its min v):
    If that frame is more than ``GAP_FRAMES`` frames of the fillet's own
    approach speed past the point (frames lost in a burst around the edge, a
    real camera's or network's dropped frames), it shows a fillet already
-   falling off and would score it far too high: Φ is absent instead of
-   wrong, and the line score below is read if the clean frames around its
-   measuring point give it, else the fillet is unscored. Frames lost inside
-   the window are found by stamp: a step
+   falling off and would score it far too high: the result is unscored
+   instead of wrong. Frames lost inside the window are found by stamp: a step
    between the fillet's sightings of more than ``GAP_FRAMES`` frame intervals
    (the approach's shortest step) into a window frame means Φ is a maximum over
    part of the window, so Φ and its terms are absent (NaN) with the reason, and
@@ -96,11 +94,7 @@ A result is produced exactly once per evaluator: 'scored' when the window
 closes, otherwise 'unscored' with a reason (no reference because the track
 started at or past the edge, the track ended before the window closed, or the
 fillet is overdue: by its own speed its centroid lies further past the edge
-than a late frame may close the window, and no frame closed it). A window that
-did not close so, or closed late, is still 'scored' on its line score when its
-clean frames give one around the measuring point (``REASON_UNCLOSED``; its Φ is
-absent): a neighbour merging with a tipping fillet, or a burst of lost frames,
-spoils the frames past that point as often as those before it. An overdue
+than a late frame may close the window, and no frame closed it). An overdue
 fillet is decided on the frame that shows it (:meth:`ShapeEvaluator.overdue`),
 not when the tracker gives its track up half a second later: the gate
 downstream still gets the verdict in time.
@@ -140,10 +134,6 @@ REASON_OVERDUE_IN_WINDOW = ("no clean frame closed the evaluation window, and by
                             "{:.0f} px past the roller edge: unscored while the gate can still act")
 REASON_LINE_GAP = ("no clean frames around the measuring point (overhang {:.2f} L): frames lost or merged with a "
                    "neighbour ({} rejected)")
-REASON_UNCLOSED = "phi absent: {}"
-"""The note on a line score read on a window no clean frame closed in time (the reason it would be unscored for):
-the centroid crossing closes the paper's Φ, which stays absent, while the line score needs only the frames around
-the measuring point."""
 MIN_SIGHTINGS = 3
 """Frames a fillet must be seen in before any verdict on it: a track seen once or twice is a piece a split cut off
 a blob for a frame or two (at the edge, where fillets merge as they tip), a fillet's first sightings at the image
@@ -763,7 +753,7 @@ class ShapeEvaluator:
             self._paper_trace.append(frame if image is points else self._score_image(image, stamp, overhang))
             overshoot = trailing + reference.centroid_offset_px - self.edge_row
             if overshoot >= 0.0 and overshoot > GAP_FRAMES * self._advance_per_frame():
-                return self._finish_unclosed(REASON_LATE_CLOSE.format(overshoot))
+                return self._finish(STATUS_UNSCORED, REASON_LATE_CLOSE.format(overshoot))
             self._closed = overshoot >= 0.0
         if self._closed and self._confirmed():
             return self._finish_line()
@@ -852,25 +842,6 @@ class ShapeEvaluator:
         return extent > (1.0 + SPILL_RATIO) * own
 
     def _finish_line(self) -> ShapeResult:
-        read = self._read_line()
-        if read is None:
-            return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
-        reason = REASON_WINDOW_GAP.format(self._window_gap) if self._window_gap else ""
-        return self._finish(STATUS_SCORED, reason, *read)
-
-    def _finish_unclosed(self, reason: str, stamp: float | None = None) -> ShapeResult:
-        """The result of a window no clean frame closed in time (``reason``): its line score when the clean frames
-        around the measuring point give it (REASON_UNCLOSED), else unscored with ``reason``. A neighbour that
-        merges with a fillet tipping past the point, or frames lost there, leave the point itself well seen."""
-        read = self._read_line()
-        if read is None:
-            return self._finish(STATUS_UNSCORED, reason, stamp=stamp)
-        return self._finish(STATUS_SCORED, REASON_UNCLOSED.format(reason), *read, stamp=stamp)
-
-    def _read_line(self) -> tuple[float, np.ndarray, float] | None:
-        """(line_phi, the outline it was read on, that frame's stamp) from the fillet's own window frames (the
-        frames :func:`own_frames` drops are counted rejected); None when no clean frames lie around the measuring
-        point, or within a frame's advance of it on one side."""
         frames = self._trace + self._extra
         kept, own = own_frames(frames)
         self._rejected += len(frames) - len(kept)
@@ -879,9 +850,10 @@ class ShapeEvaluator:
         if nearer is None or not math.isfinite(line_phi) or is_gap(gap, step):
             line_phi, nearer = extrapolate_at(own, self.line_fraction, step)
         if nearer is None or not math.isfinite(line_phi):
-            return None
+            return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
+        reason = REASON_WINDOW_GAP.format(self._window_gap) if self._window_gap else ""
         nearer = kept[nearer]
-        return line_phi, self._contours[nearer], frames[nearer].stamp
+        return self._finish(STATUS_SCORED, reason, line_phi, self._contours[nearer], frames[nearer].stamp)
 
     def _advance_per_frame(self) -> float:
         """Rows the fillet moved per camera frame while flat (inf when too few frames tell)."""
@@ -898,15 +870,18 @@ class ShapeEvaluator:
         return (r1 - r0) / (t1 - t0) if t1 > t0 else math.nan
 
     def overdue(self, stamp: float) -> ShapeResult | None:
-        """The result once, by its own speed, this fillet's centroid lies further past the edge at ``stamp`` than
-        a late frame may close its window (``GAP_FRAMES`` frames of advance) and no frame closed it: its track went
-        unseen or only merged frames came. Scored on its line score if the clean frames around the measuring point
-        give it, else unscored. A frame arriving later would close the window no better (REASON_LATE_CLOSE);
-        deciding now, not when the track ends, gets the verdict to the gate in time.
-        The result is stamped with the moment the centroid was due at the edge. None while the window may
-        still close, once it has, or when the fillet's speed is unknown."""
-        if self._phase is _Phase.DONE or self._closed or self._last_trailing is None:
+        """The unscored result once, by its own speed, this fillet's centroid lies further past the edge at
+        ``stamp`` than a late frame may close its window (``GAP_FRAMES`` frames of advance) and no frame closed
+        it: its track went unseen or only merged frames came. A frame arriving later would leave it unscored
+        anyway (REASON_LATE_CLOSE); deciding now, not when the track ends, gets the verdict to the gate in time.
+        The result is stamped with the moment the centroid was due at the edge. A closed window whose measuring
+        point no later frame has confirmed (the frames past it merged, or went unseen) is likewise read once, by
+        its speed, the fillet lies that far past the point: on the frames it has, as when its track ends. None
+        while the window may still close or its point be confirmed, or when the fillet's speed is unknown."""
+        if self._phase is _Phase.DONE or self._last_trailing is None:
             return None
+        if self._closed:
+            return self._finish_line() if self._past_line(stamp) else None
         if self._reference is None and not self._front_past_edge(stamp):
             return None  # the centroid lies behind the front: no outline to measure while the front is short of it
         reference = self._reference or (make_reference(self._flat[-1].points, self.tip_ratio) if self._flat else None)
@@ -919,7 +894,14 @@ class ShapeEvaluator:
         due = self._due_at_edge(reference)
         if self._reference is None:
             return self._finish(STATUS_UNSCORED, REASON_OVERDUE_BEFORE_EDGE, stamp=due)
-        return self._finish_unclosed(REASON_OVERDUE_IN_WINDOW.format(overshoot), stamp=due)
+        return self._finish(STATUS_UNSCORED, REASON_OVERDUE_IN_WINDOW.format(overshoot), stamp=due)
+
+    def _past_line(self, stamp: float) -> bool:
+        """Whether, by its speed, the fillet's rigid overhang at ``stamp`` lies past the measuring point by more
+        than ``GAP_FRAMES`` frames of advance."""
+        length = self._reference.length_px
+        beyond = self.predicted_trailing(stamp) + length - self.edge_row - self.line_fraction * length
+        return self._speed_px_s() > 0.0 and beyond > GAP_FRAMES * self._advance_per_frame()
 
     def crossing_stamp(self) -> float | None:
         """When the fillet's centroid crossed the edge, or by its speed is due there: its own trailing edge, last
@@ -942,15 +924,13 @@ class ShapeEvaluator:
         return leading + self._speed_px_s() * (stamp - seen) > self.edge_row
 
     def finish(self) -> ShapeResult | None:
-        """The track ended: its result (scored when the frames it has give a line score, else unscored), or None if
-        a result was already produced."""
+        """The track ended: the unscored result, or None if a result was already produced."""
         if self._phase is _Phase.DONE:
             return None
         if self._closed:
             return self._finish_line()  # scored on the frames around the measuring point, if it was passed
-        if self._trace:
-            return self._finish_unclosed(REASON_LOST_IN_WINDOW)
-        return self._finish(STATUS_UNSCORED, REASON_LOST_BEFORE_EDGE)
+        reason = REASON_LOST_IN_WINDOW if self._trace else REASON_LOST_BEFORE_EDGE
+        return self._finish(STATUS_UNSCORED, reason)
 
     def _score_image(self, image: np.ndarray, stamp: float, overhang: float) -> FrameScore:
         """Φ_t of the image outline's body, clipped like the followed outline's from its own trailing edge."""

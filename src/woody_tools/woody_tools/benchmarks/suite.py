@@ -211,7 +211,7 @@ def bench_vision(frames: int, seconds: float) -> dict:
     from woody_tools.benchmarks.vision import benchmark_vision
 
     figures = dict(benchmark_vision(frames=frames))
-    latency = measure_verdict_latency(seconds)  # closing frame published -> verdict received, across processes
+    latency = measure_verdict_latency(seconds)  # deciding frame published -> verdict received, across processes
     figures["verdict_latency_ms_p50"] = latency["p50_ms"]
     figures["verdict_latency_ms_p95"] = latency["p95_ms"]
     figures["verdict_latency_count"] = latency["count"]

@@ -1,9 +1,13 @@
-"""Verdict latency across processes: closing frame published here → verdict received here.
+"""Verdict latency across processes: deciding frame published here → verdict received here.
 
 Starts the real segmenter and grader entry points on a private domain, plays a
 synthetic multi-lane top-down stream (woody_vision.synthetic) at 30 Hz with
-/clock and camera_info, and times every verdict against the wall time its
-closing frame (same header stamp) was published.
+/clock and camera_info, and times every scored verdict against the wall time the
+frame it was decided on was published: the latest frame published before the
+verdict arrived, of those at or after the fillet's crossing (the verdict's stamp).
+The grader decides on the frame that confirms the measuring point, a frame or two
+after the crossing, well within a frame interval of it; were it more than a frame
+behind, the figure would read low.
 """
 
 from __future__ import annotations
@@ -73,7 +77,7 @@ def measure_verdict_latency(seconds: float = 10.0, lanes: int = 3, seed: int = 3
 
 
 def _start_listener(context, published: dict[int, float], latencies: list[float]):
-    """A node on its own executor thread taking each verdict's latency from when its closing frame went out."""
+    """A node on its own executor thread taking each verdict's latency from when its deciding frame went out."""
     import rclpy
     from rclpy.qos import QoSProfile
 
@@ -81,10 +85,11 @@ def _start_listener(context, published: dict[int, float], latencies: list[float]
 
     def on_verdict(msg: FilletVerdict) -> None:
         if msg.classification == FilletVerdict.CLASS_UNSCORED:
-            return  # no window closed: its stamp is the last frame seen, max_unseen frames before the verdict
-        key = stamp_to_nanoseconds(msg.header.stamp)
-        if key in published:
-            latencies.append((time.monotonic() - published[key]) * 1e3)
+            return  # decided when the fillet was overdue or its track ended, frames after any frame of it
+        now, crossing = time.monotonic(), stamp_to_nanoseconds(msg.header.stamp)
+        sent = [when for stamp, when in list(published.items()) if stamp >= crossing and when <= now]
+        if sent:
+            latencies.append((now - max(sent)) * 1e3)
 
     # Verdicts are timestamped by their own executor thread, so drawing the next frame never delays them.
     listener = rclpy.create_node("bench_latency_listener", context=context)
