@@ -29,7 +29,15 @@ from woody_common.line import (
     TOP_EDGE_OFFSET_M,
 )
 from woody_common.stamps import stamp_to_seconds
-from woody_experiments.live_evaluation import RUNS_DIR, failures_by_reason, tally, woody_not_diverted
+from woody_experiments.live_evaluation import (
+    LIVE_CONDITIONS,
+    RUNS_DIR,
+    Cell,
+    failures_by_reason,
+    summary_lines,
+    tally,
+    woody_not_diverted,
+)
 from woody_experiments.messages import spawn_from_msg, verdict_from_msg
 from woody_experiments.run_report import join
 from woody_vision.camera_model import LaneLayout, belt_outline, edge_row
@@ -80,7 +88,7 @@ def replay_run(run: Path, split_by_tracks: bool) -> list[dict]:
         verdicts += [verdict_from_msg(verdict_message(g, grader.rules, "", stamp)) for g in graded]
     truth = read_bag(run / "line.mcap", ["/" + topics.GROUND_TRUTH])
     spawns = [spawn_from_msg(decode(m.type_name, m.data)) for m in truth]
-    return [{**row, "run": run.name} for row in join(spawns, verdicts)]
+    return [{**Cell.from_name(run.name).columns, **row} for row in join(spawns, verdicts)]
 
 
 def main() -> None:
@@ -89,10 +97,13 @@ def main() -> None:
     parser.add_argument("--no-split-by-tracks", dest="split_by_tracks", action="store_false",
                         help="the segmenter's split_by_tracks:=false")
     args = parser.parse_args()
-    rows = []
+    rows, cells = [], []
     for run in sorted((args.folder / RUNS_DIR).iterdir()):
         rows += replay_run(run, args.split_by_tracks)
+        cells.append(Cell.from_name(run.name))
         print(f"  {run.name}", flush=True)
+    order = sorted(cells, key=lambda c: (LIVE_CONDITIONS.index(c.condition), c.lanes, c.speed_fpm))
+    print("\n".join(summary_lines(rows, order)))
     t = tally(rows)
     print(f"{t.runs} runs, {t.fillets} fillets: right {t.right}, unscored {t.unscored}, missing {t.missing}, "
           f"extra {t.extra}, woody not diverted {t.woody_not_diverted} of {t.woody}")

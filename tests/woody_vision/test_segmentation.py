@@ -491,7 +491,7 @@ def test_a_blob_holding_two_tracked_fillets_is_split_where_their_priors_lie():
     assert abs(by_column[0].area_px - 4000) < 300 and abs(by_column[1].area_px - 4000) < 300
 
 
-def test_a_slivers_prior_two_priors_of_one_fillet_or_the_fillet_ahead_never_split_it():
+def test_a_slivers_prior_or_two_priors_of_one_fillet_never_split_it():
     mask = np.zeros((200, 300), np.uint8)
     whole = rectangle(100, 50, 60, 100)
     cv2.fillPoly(mask, [whole], 255)
@@ -501,8 +501,16 @@ def test_a_slivers_prior_two_priors_of_one_fillet_or_the_fillet_ahead_never_spli
     halves = [rectangle(100, 50, 30, 100), rectangle(130, 50, 30, 100)]  # no growth past the larger: one fillet
     assert len(segment_mask(mask, height, SegmentationParams(), [whole, *halves])) == 1
     assert len(segment_mask(mask, height, SegmentationParams(), [rectangle(10, 10, 20, 20)] * 2)) == 1
-    tip_to_tail = np.zeros((300, 300), np.uint8)  # a fillet reaching the one that hangs ahead of it in its lane
+
+
+def test_a_fillet_reaching_the_one_hanging_ahead_of_it_is_split_from_it():
+    """End to end, with the priors a few rows off where each lies (the one ahead falls slower than the belt)."""
+    tip_to_tail = np.zeros((300, 300), np.uint8)
     cv2.fillPoly(tip_to_tail, [rectangle(100, 20, 50, 100), rectangle(100, 120, 50, 100)], 255)
     ahead, behind = rectangle(100, 125, 50, 100), rectangle(100, 15, 50, 100)
-    assert len(segment_mask(tip_to_tail, np.full(tip_to_tail.shape, 0.02, np.float32), SegmentationParams(),
-                            [ahead, behind])) == 1
+    blobs = segment_mask(tip_to_tail, np.full(tip_to_tail.shape, 0.02, np.float32), SegmentationParams(),
+                         [ahead, behind])
+    assert len(blobs) == 2
+    first, second = sorted(blobs, key=lambda b: b.centroid[1])
+    assert abs(int(first.contour[:, 1].max()) - 120) <= 6  # parted where the two meet
+    assert abs(second.area_px - first.area_px) <= 0.1 * first.area_px

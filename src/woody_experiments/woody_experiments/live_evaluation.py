@@ -65,6 +65,10 @@ CELL_COLUMNS = ["run", "condition", "seed", "lanes", "speed"]
 (FPM)."""
 
 
+CELL_NAME = re.compile(r"([a-z]+)-(\d+)lanes-([0-9.]+)fpm-seed(\d+)")
+"""A run folder's name (:attr:`Cell.name`)."""
+
+
 @dataclass(frozen=True)
 class Cell:
     """One `woody run` of the grid."""
@@ -77,6 +81,20 @@ class Cell:
     @property
     def name(self) -> str:
         return f"{self.condition}-{self.lanes}lanes-{self.speed_fpm:g}fpm-seed{self.seed}"
+
+    @classmethod
+    def from_name(cls, name: str) -> Cell:
+        """The cell whose run folder is ``name`` (:attr:`name`)."""
+        match = CELL_NAME.fullmatch(name)
+        if match is None:
+            raise ValueError(f"not a woody evaluate run folder name: {name!r}")
+        condition, lanes, speed, seed = match.groups()
+        return cls(condition, int(lanes), float(speed), int(seed))
+
+    @property
+    def columns(self) -> dict[str, object]:
+        """The cell's CELL_COLUMNS, as evaluation.csv carries them."""
+        return dict(zip(CELL_COLUMNS, (self.name, self.condition, self.seed, self.lanes, self.speed_fpm)))
 
     @property
     def group(self) -> tuple[str, int, float]:
@@ -142,8 +160,7 @@ def cell_rows(out: Path, cells: Sequence[Cell]) -> list[dict]:
     rows = []
     for cell in cells:
         if is_done(out, cell):
-            columns = dict(zip(CELL_COLUMNS, (cell.name, cell.condition, cell.seed, cell.lanes, cell.speed_fpm)))
-            rows += [{**columns, **row} for row in read_csv(cell_folder(out, cell) / VERDICTS)]
+            rows += [{**cell.columns, **row} for row in read_csv(cell_folder(out, cell) / VERDICTS)]
     return rows
 
 

@@ -443,16 +443,18 @@ def _split_by_priors(part: tuple[np.ndarray, np.ndarray | None], priors: Sequenc
     Two fillets that touch where neither a neck nor their heights part them (side by side as they tip over the
     roller, where the background falls to the floor) are one blob, and the tracker would follow one of them
     through it and lose the other. The tracker knows where each should lie: a blob that holds PRIOR_OVERLAP of
-    two or more priors of a fillet's size lying side by side and has grown past the largest (MERGE_AREA_RATIO)
-    is split by a distance watershed from the priors' own pixels. A sliver's prior (smaller than
-    PRIOR_AREA_RATIO of the largest) never splits a fillet, nor do two priors of one fillet, which leave no
-    growth, nor a fillet and the one hanging ahead of it in its lane (that one's prediction fails as it tips).
+    two or more priors of a fillet's size and has grown past the largest (MERGE_AREA_RATIO) is split by a
+    distance watershed from the priors' own pixels, those two priors claim left out. A sliver's prior (smaller
+    than PRIOR_AREA_RATIO of the largest) never splits a fillet, nor do two priors of one fillet, which leave no
+    growth. The fillets may lie side by side or one behind the other: a fillet whose front reaches the edge
+    joins the remains of the lane-mate hanging ahead, whose prior, moved at the belt's speed as it falls, lies
+    off it; what that prior claims of the follower's own prior is claimed twice and left to the watershed.
     """
     mask = part[0]
     held = [prior for prior in priors if _held(mask, prior, origin)]
     largest = max((cv2.contourArea(prior) for prior in held), default=0.0)
     held = [prior for prior in held if cv2.contourArea(prior) >= PRIOR_AREA_RATIO * largest]
-    if len(held) < 2 or cv2.countNonZero(mask) < MERGE_AREA_RATIO * largest or not _all_side_by_side(held):
+    if len(held) < 2 or cv2.countNonZero(mask) < MERGE_AREA_RATIO * largest:
         return [part]
     markers = np.zeros(mask.shape, np.int32)
     claims = np.zeros(mask.shape, np.uint8)
@@ -464,18 +466,6 @@ def _split_by_priors(part: tuple[np.ndarray, np.ndarray | None], priors: Sequenc
     markers[claims > 1] = 0
     labels = _flood(cv2.distanceTransform(mask, cv2.DIST_L2, 5), markers, mask)
     return _region_masks(labels, range(1, len(held) + 1))
-
-
-def _all_side_by_side(priors: list[np.ndarray]) -> bool:
-    """Whether every two priors lie beside each other across the flow: sharing SIDE_BY_SIDE_OVERLAP of the
-    shorter one's rows and at most half the narrower one's columns."""
-    boxes = [cv2.boundingRect(prior) for prior in priors]
-    for i, (u, v, width, rows) in enumerate(boxes):
-        for other_u, other_v, other_width, other_rows in boxes[i + 1:]:
-            shared_columns = _shared(u, width, other_u, other_width)
-            if not _rows_side_by_side(v, rows, other_v, other_rows) or shared_columns > 0.5 * min(width, other_width):
-                return False
-    return True
 
 
 def _shared(start: int, length: int, other_start: int, other_length: int) -> int:
