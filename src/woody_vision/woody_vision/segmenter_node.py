@@ -131,9 +131,9 @@ class Segmenter(Node):
             color_search_px=declare(self, "color_search_px", 8, "Colour refines the outline only this close to the "
                                     "depth mask (px).", 0, 100),
             split_by_tracks=declare(self, "split_by_tracks", segmentation.SegmentationParams.split_by_tracks,
-                                    "Split a blob holding several tracked fillets side by side where the tracker "
-                                    "predicts them: fewer unscored fillets at the edge of a crowded line "
-                                    "(docs/results.md)."),
+                                    "Split a blob holding several tracked fillets (side by side, or a fillet and "
+                                    "the lane-mate hanging ahead) where the tracker predicts them: fewer unscored "
+                                    "fillets at the edge of a crowded line (docs/results.md)."),
             height_core_floor=declare(self, "height_core_floor", HEIGHT_CORE_RATIO, "A blob wider than "
                                       f"max_fillet_width_m is split at its thick middles, cut at {HEIGHT_CORE_RATIO:g}"
                                       " x its height and lower down to this: lower splits a thin fillet from a thick "
