@@ -444,7 +444,7 @@ def _split_by_priors(part: tuple[np.ndarray, np.ndarray | None], priors: Sequenc
     roller, where the background falls to the floor) are one blob, and the tracker would follow one of them
     through it and lose the other. The tracker knows where each should lie: a blob that holds PRIOR_OVERLAP of
     two or more priors of a fillet's size and has grown past the largest (MERGE_AREA_RATIO) is split by a
-    distance watershed from the priors' own pixels, those two priors claim left out. A sliver's prior (smaller
+    distance watershed from the priors' own pixels (less the pixels two of them claim). A sliver's prior (smaller
     than PRIOR_AREA_RATIO of the largest) never splits a fillet, nor do two priors of one fillet, which leave no
     growth. The fillets may lie side by side or one behind the other: a fillet whose front reaches the edge
     joins the remains of the lane-mate hanging ahead, whose prior, moved at the belt's speed as it falls, lies
