@@ -63,7 +63,6 @@ def write_cells(out, rows_by_cell=ROWS) -> None:
         write_run_record(out, cell, ["woody", "run"], 0, 12.0)
 
 
-
 def test_a_cell_is_read_back_from_its_run_folders_name():
     for cell in (TIDY, CROWDED, Cell("gaps", 6, 130.0, 35), Cell("messy", 3, 82.5, 7)):
         assert Cell.from_name(cell.name) == cell
@@ -71,6 +70,7 @@ def test_a_cell_is_read_back_from_its_run_folders_name():
                                 "lanes": cell.lanes, "speed": cell.speed_fpm}
     with pytest.raises(ValueError, match="not a woody evaluate run folder name"):
         Cell.from_name("run-2026-12-02")
+
 
 def test_the_grid_runs_seed_by_seed():
     cells = grid([1, 2], ["tidy", "gaps"], [3], [100.0, 130.0])
