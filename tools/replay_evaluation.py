@@ -88,7 +88,15 @@ def replay_run(run: Path, split_by_tracks: bool) -> list[dict]:
         verdicts += [verdict_from_msg(verdict_message(g, grader.rules, "", stamp)) for g in graded]
     truth = read_bag(run / "line.mcap", ["/" + topics.GROUND_TRUTH])
     spawns = [spawn_from_msg(decode(m.type_name, m.data)) for m in truth]
-    return [{**Cell.from_name(run.name).columns, **row} for row in join(spawns, verdicts)]
+    return [{**row, "run": run.name} for row in join(spawns, verdicts)]
+
+
+def _cell(name: str) -> Cell | None:
+    """The grid cell a run folder's name gives (None for a folder of another name)."""
+    try:
+        return Cell.from_name(name)
+    except ValueError:
+        return None
 
 
 def main() -> None:
@@ -98,12 +106,15 @@ def main() -> None:
                         help="the segmenter's split_by_tracks:=false")
     args = parser.parse_args()
     rows, cells = [], []
-    for run in sorted((args.folder / RUNS_DIR).iterdir()):
-        rows += replay_run(run, args.split_by_tracks)
-        cells.append(Cell.from_name(run.name))
+    runs = sorted((args.folder / RUNS_DIR).iterdir())
+    for run in runs:
+        cell = _cell(run.name)
+        rows += [{**(cell.columns if cell else {}), **row} for row in replay_run(run, args.split_by_tracks)]
+        cells += [cell] if cell else []
         print(f"  {run.name}", flush=True)
-    order = sorted(cells, key=lambda c: (LIVE_CONDITIONS.index(c.condition), c.lanes, c.speed_fpm))
-    print("\n".join(summary_lines(rows, order)))
+    if len(cells) == len(runs):  # every run a cell of the grid: its table, as woody evaluate prints it
+        order = sorted(cells, key=lambda c: (LIVE_CONDITIONS.index(c.condition), c.lanes, c.speed_fpm))
+        print("\n".join(summary_lines(rows, order)))
     t = tally(rows)
     print(f"{t.runs} runs, {t.fillets} fillets: right {t.right}, unscored {t.unscored}, missing {t.missing}, "
           f"extra {t.extra}, woody not diverted {t.woody_not_diverted} of {t.woody}")

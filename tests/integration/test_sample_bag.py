@@ -109,8 +109,14 @@ def replay_into_vision(bag, topics, ros_node, ros_domain, tmp_path, segmenter_pa
     return received, logs
 
 
-def assert_same_verdicts(heard: Heard, logs: str, phi_rel: float = 1e-6) -> None:
-    """The sample's verdicts and side metrics again: same lanes, classes, crossing stamps, Φ within ``phi_rel``."""
+OUTLINE_CROSSING_S = 0.005
+"""How far another outline of the same frames may move a verdict's crossing stamp: it is read off the fillet's
+trailing edge, and a pixel of it is 4 ms at the sample's 100 FPM."""
+
+
+def assert_same_verdicts(heard: Heard, logs: str, phi_rel: float = 1e-6, stamp_s: float = 0.0) -> None:
+    """The sample's verdicts and side metrics again: same lanes, classes, crossing stamps (within ``stamp_s``), Φ
+    within ``phi_rel``."""
     received, expected = heard.verdicts, recorded_verdicts()
     seen = [(v.lane, round(stamp_to_seconds(v.header.stamp), 3), v.classification, v.unscored_reason) for v in received]
     assert len(received) == len(expected), f"{seen}\n{logs}"
@@ -118,13 +124,17 @@ def assert_same_verdicts(heard: Heard, logs: str, phi_rel: float = 1e-6) -> None
     def key(v):
         return (v.lane, v.header.stamp.sec, v.header.stamp.nanosec)
 
+    def stamp(v) -> float:
+        return stamp_to_seconds(v.header.stamp)
+
     for got, want in zip(sorted(received, key=key), sorted(expected, key=key)):
-        assert (got.lane, got.classification, got.header.stamp) == (want.lane, want.classification,
-                                                                    want.header.stamp), (got.unscored_reason, logs)
+        assert (got.lane, got.classification) == (want.lane, want.classification), (got.unscored_reason, logs)
+        assert stamp(got) == pytest.approx(stamp(want), abs=stamp_s), (got.unscored_reason, logs)
         assert got.phi == pytest.approx(want.phi, rel=phi_rel)
     assert len(heard.sides) == len(recorded_sides()), logs
     for got, want in zip(sorted(heard.sides, key=key), sorted(recorded_sides(), key=key)):
-        assert (got.lane, got.header.stamp, got.measured) == (want.lane, want.header.stamp, want.measured)
+        assert (got.lane, got.measured) == (want.lane, want.measured)
+        assert stamp(got) == pytest.approx(stamp(want), abs=stamp_s)
         if want.measured:
             assert got.nmdm == pytest.approx(want.nmdm, rel=1e-6) and got.be == pytest.approx(want.be, rel=1e-6)
         else:
@@ -185,9 +195,9 @@ def test_16uc1_depth_and_bgr8_colour_over_best_effort_give_the_same_verdicts(ros
     received, logs = replay_into_vision(bag, [*CAMERA_TOPICS, COLOUR], ros_node, ros_domain, tmp_path,
                                         {"publish_debug_image": True})
     assert "Traceback" not in logs and "FrameError" not in logs, logs
-    # Same class, lane, crossing stamp and side metrics; Φ moves (2-19 % on these three fillets) because
-    # millimetre depth shifts the 5 mm height threshold by up to half a step on the fillets' thin edges.
-    assert_same_verdicts(received[""], logs, phi_rel=0.25)
+    # Same class, lane, crossing stamp (within a pixel of trailing edge) and side metrics; Φ moves (2-19 % on these
+    # three fillets) because millimetre depth shifts the 5 mm height threshold by up to half a step on thin edges.
+    assert_same_verdicts(received[""], logs, phi_rel=0.25, stamp_s=OUTLINE_CROSSING_S)
 
 
 def test_outline_from_the_registered_colour_gives_the_same_classes(ros_node, ros_domain, tmp_path):
@@ -202,7 +212,7 @@ def test_outline_from_the_registered_colour_gives_the_same_classes(ros_node, ros
     # Pairing by stamp works: only frames whose colour was lost over best effort are skipped (a few %, more on a
     # loaded machine: 9 of 179 in one CI run), never most of them.
     assert skipped and int(skipped[2]) <= 0.2 * int(skipped[1]), logs
-    assert_same_verdicts(received[""], logs, phi_rel=1.0)
+    assert_same_verdicts(received[""], logs, phi_rel=1.0, stamp_s=OUTLINE_CROSSING_S)
 
 
 def test_two_namespaced_lines_share_a_domain_without_crosstalk(ros_node, ros_domain, tmp_path):
