@@ -76,17 +76,19 @@ def crossed_just_before(published: float, verdict: GradedFillet) -> bool:
     return 0.0 <= published - verdict.shape.stamp <= 2 / FPS
 
 
+def whole_verdict(shapes, t0: float = 0.0) -> GradedFillet:
+    """The verdict of a fresh grader fed every frame of ``shapes``."""
+    ((_, verdict),) = feed(FilletGrader(EDGE), 0, 0, shapes, t0)
+    return verdict
+
+
 def closing_stamp(shapes, t0: float = 0.0) -> float:
-    grader = FilletGrader(EDGE)
-    ((stamp, verdict),) = feed(grader, 0, 0, shapes, t0)
-    return verdict.shape.stamp
+    return whole_verdict(shapes, t0).shape.stamp
 
 
 def opening_frame(shapes) -> int:
     """The index of the first frame of the window: the frames before its measuring point follow it."""
-    grader = FilletGrader(EDGE)
-    ((_, verdict),) = feed(grader, 0, 0, shapes)
-    return int(round(verdict.shape.trace[0].stamp * FPS))
+    return int(round(whole_verdict(shapes).shape.trace[0].stamp * FPS))
 
 
 def through_close(shapes, extra: int = 3) -> list[np.ndarray]:

@@ -881,27 +881,28 @@ class ShapeEvaluator:
         if self._phase is _Phase.DONE or self._last_trailing is None:
             return None
         if self._closed:
-            return self._finish_line() if self._past_line(stamp) else None
+            past_point = (1.0 - self.line_fraction) * self._reference.length_px  # the measuring point's trailing edge
+            return self._finish_line() if self._overdue_px(past_point, stamp) is not None else None
         if self._reference is None and not self._front_past_edge(stamp):
             return None  # the centroid lies behind the front: no outline to measure while the front is short of it
         reference = self._reference or (make_reference(self._flat[-1].points, self.tip_ratio) if self._flat else None)
         if reference is None:
             return None
-        speed = self._speed_px_s()
-        overshoot = self.predicted_trailing(stamp) + reference.centroid_offset_px - self.edge_row
-        if not (speed > 0.0 and overshoot > GAP_FRAMES * self._advance_per_frame()):  # False too on a NaN speed
+        overshoot = self._overdue_px(reference.centroid_offset_px, stamp)
+        if overshoot is None:
             return None
         due = self._due_at_edge(reference)
         if self._reference is None:
             return self._finish(STATUS_UNSCORED, REASON_OVERDUE_BEFORE_EDGE, stamp=due)
         return self._finish(STATUS_UNSCORED, REASON_OVERDUE_IN_WINDOW.format(overshoot), stamp=due)
 
-    def _past_line(self, stamp: float) -> bool:
-        """Whether, by its speed, the fillet's rigid overhang at ``stamp`` lies past the measuring point by more
-        than ``GAP_FRAMES`` frames of advance."""
-        length = self._reference.length_px
-        beyond = self.predicted_trailing(stamp) + length - self.edge_row - self.line_fraction * length
-        return self._speed_px_s() > 0.0 and beyond > GAP_FRAMES * self._advance_per_frame()
+    def _overdue_px(self, offset_px: float, stamp: float) -> float | None:
+        """How far past the edge, by the fillet's speed, the point ``offset_px`` ahead of its trailing edge lies at
+        ``stamp``, when that is further than a late frame may close (``GAP_FRAMES`` frames of advance); None while
+        it is not, or when the speed is unknown."""
+        overshoot = self.predicted_trailing(stamp) + offset_px - self.edge_row
+        late = self._speed_px_s() > 0.0 and overshoot > GAP_FRAMES * self._advance_per_frame()  # False on a NaN speed
+        return overshoot if late else None
 
     def crossing_stamp(self) -> float | None:
         """When the fillet's centroid crossed the edge, or by its speed is due there: its own trailing edge, last
