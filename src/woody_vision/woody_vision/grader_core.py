@@ -302,7 +302,7 @@ class FilletGrader:
     def _decide(self, track_id: int, result: ShapeResult, area_px: float = 0.0) -> list[GradedFillet]:
         lane = self._lanes.get(track_id, -1)
         bereft = track_id in self._bereft and result.reason == REASON_STARTED_PAST_EDGE
-        if bereft or (result.reason in PIECE_REASONS and self._is_piece(lane, track_id, area_px)):
+        if bereft or self._is_fragment(lane, track_id, result, area_px):
             self.fragments += 1
             return []
         graded = self._classify(track_id, lane, result)
@@ -351,6 +351,16 @@ class FilletGrader:
         self.taken_over += 1
         self._bereft.add(owner)
         return self._evaluators.pop(owner)
+
+    def _is_fragment(self, lane: int, track_id: int, result: ShapeResult, area_px: float) -> bool:
+        """Whether an unscored result is a piece's (:meth:`_is_piece`): a track that ended as only a piece's does
+        (PIECE_REASONS), with the blob's ``area_px``, or any unscored window whose flat reference outline was a
+        piece's, with that outline's area (a split of two touching fillets gave a sliver a track of its own before
+        the edge; it opens a window it cannot score)."""
+        if result.reason in PIECE_REASONS:
+            return self._is_piece(lane, track_id, area_px)
+        piece_window = result.status == STATUS_UNSCORED and result.reference_contour is not None
+        return piece_window and self._is_piece(lane, track_id, _area(result.reference_contour))
 
     def _is_piece(self, lane: int, track_id: int, area_px: float) -> bool:
         """Whether a track that first appears past the edge, or ends before its body reaches it, is a piece of a
