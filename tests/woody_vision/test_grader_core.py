@@ -167,23 +167,23 @@ def test_a_piece_split_off_past_the_edge_gets_no_verdict_but_a_fillet_appearing_
     assert alone.label == "unscored" and alone.shape.reason == REASON_STARTED_PAST_EDGE
 
 
-def sliver_window(grader: FilletGrader, lane: int, with_fillet: bool) -> list[GradedFillet]:
+def sliver_window(grader: FilletGrader, lane: int) -> list[GradedFillet]:
     """Track 2, a sliver a split gave a track of its own, rides beside lane 0's fillet (track 1) from before the
     edge until its track ends inside its window; track 1 goes on."""
-    shapes, out = contours(60), []
-    for i, contour in enumerate(shapes):
+    out, ended = [], False
+    for i, contour in enumerate(contours(60)):
         sliver = np.round(teardrop_polygon((380.0, contour[:, 1].min() + 30.0), 30.0, 16.0)).astype(np.int32)
-        observed = [TrackObservation(1, 0, contour)] if with_fillet else []
-        observed += [TrackObservation(2, lane, sliver)] if sliver[:, 1].max() < EDGE + 12 else []
-        ended = [2] if sliver[:, 1].max() >= EDGE + 12 and not any(g.fillet_id == 2 for g in out) else []
-        out += grader.on_tracks(i / FPS, observed, ended_ids=ended)
+        seen = sliver[:, 1].max() < EDGE + 12
+        observed = [TrackObservation(1, 0, contour)] + ([TrackObservation(2, lane, sliver)] if seen else [])
+        out += grader.on_tracks(i / FPS, observed, ended_ids=[2] if not (seen or ended) else [])
+        ended = ended or not seen
     return [g for g in out if g.fillet_id == 2]
 
 
 def test_a_sliver_that_opened_a_window_beside_its_lanes_fillet_gets_no_verdict_but_one_alone_does():
     grader = FilletGrader(EDGE, GradingRules(threshold=1.0))
-    assert sliver_window(grader, lane=0, with_fillet=True) == [] and grader.fragments == 1
-    (alone,) = sliver_window(FilletGrader(EDGE, GradingRules(threshold=1.0)), lane=1, with_fillet=True)
+    assert sliver_window(grader, lane=0) == [] and grader.fragments == 1
+    (alone,) = sliver_window(FilletGrader(EDGE, GradingRules(threshold=1.0)), lane=1)
     assert alone.label == "unscored" and alone.shape.reference_contour is not None  # no fillet in its lane: heard
     assert alone.shape.reason not in PIECE_REASONS
 
