@@ -12,6 +12,7 @@ from woody_vision.grader_core import (
     JOINED_MARGIN_LN,
     JOINED_MERGED_FRAMES,
     PIECE_REASONS,
+    REASON_BOUND,
     REASON_NO_SIDE,
     SIDE_MATCH_SLACK_S,
     SIDE_SILENT_S,
@@ -37,11 +38,12 @@ WAIT = 0.8
 WATCHED = 1
 
 
-def contours(frames: int = 90, start_tip_v: float = 120.0, step: float = 3.0, bend: float = 1.0) -> list[np.ndarray]:
+def contours(frames: int = 90, start_tip_v: float = 120.0, step: float = 3.0, bend: float = 1.0,
+             narrow_first: bool = True) -> list[np.ndarray]:
     """A teardrop moving down through the edge row; ``bend`` < 1 shortens the part beyond the edge (flexible)."""
     out = []
     for i in range(frames):
-        p = teardrop_polygon((300.0, start_tip_v + i * step - 55.0), 110.0, 60.0)
+        p = teardrop_polygon((300.0, start_tip_v + i * step - 55.0), 110.0, 60.0, tip_down=narrow_first)
         over = p[:, 1] > EDGE
         p[over, 1] = EDGE + (p[over, 1] - EDGE) * bend
         out.append(np.round(p).astype(np.int32))
@@ -167,13 +169,14 @@ def test_a_piece_split_off_past_the_edge_gets_no_verdict_but_a_fillet_appearing_
     assert alone.label == "unscored" and alone.shape.reason == REASON_STARTED_PAST_EDGE
 
 
-def sliver_window(grader: FilletGrader, lane: int) -> list[GradedFillet]:
+def sliver_window(grader: FilletGrader, lane: int, past_edge_px: float = 12.0) -> list[GradedFillet]:
     """Track 2, a sliver a split gave a track of its own, rides beside lane 0's fillet (track 1) from before the
-    edge until its track ends inside its window; track 1 goes on."""
+    edge until its track ends with its front ``past_edge_px`` past the edge (inside its window by default); track 1
+    goes on."""
     out, ended = [], False
     for i, contour in enumerate(contours(60)):
         sliver = np.round(teardrop_polygon((380.0, contour[:, 1].min() + 30.0), 30.0, 16.0)).astype(np.int32)
-        seen = sliver[:, 1].max() < EDGE + 12
+        seen = sliver[:, 1].max() < EDGE + past_edge_px
         observed = [TrackObservation(1, 0, contour)] + ([TrackObservation(2, lane, sliver)] if seen else [])
         out += grader.on_tracks(i / FPS, observed, ended_ids=[2] if not (seen or ended) else [])
         ended = ended or not seen
@@ -186,6 +189,18 @@ def test_a_sliver_that_opened_a_window_beside_its_lanes_fillet_gets_no_verdict_b
     (alone,) = sliver_window(FilletGrader(EDGE, GradingRules(threshold=1.0)), lane=1)
     assert alone.label == "unscored" and alone.shape.reference_contour is not None  # no fillet in its lane: heard
     assert alone.shape.reason not in PIECE_REASONS
+
+
+def test_a_sliver_that_scored_a_window_outside_the_calibration_beside_its_lanes_fillet_gets_no_verdict():
+    """Its score would make it unscored (a sliver is shorter than any fillet the cuts were fitted on, or turned
+    past them): a piece, like a sliver whose window did not close."""
+    fitted = FittedRange(0.5, 1.5, 45.0, 0.5, 2.0)  # at 100 px/m the fillet is 1.1 m long, the sliver 0.3 m
+    def grader():
+        return FilletGrader(EDGE, GradingRules(threshold=1.0), pixels_per_metre=100.0, fitted_range=fitted)
+    beside = grader()
+    assert sliver_window(beside, lane=0, past_edge_px=40.0) == [] and beside.fragments == 1
+    (alone,) = sliver_window(grader(), lane=1, past_edge_px=40.0)
+    assert alone.label == "unscored" and alone.reason.startswith("outside the calibration: measured body length")
 
 
 def test_a_fillet_first_seen_past_the_edge_beside_its_lane_neighbour_gets_its_unscored_verdict():
@@ -313,6 +328,43 @@ def test_a_fillet_graded_normal_on_frames_split_from_a_neighbour_in_a_window_wit
     assert verdict.label == "unscored" and verdict.shape.window_gap_s == pytest.approx(3 / FPS)
     assert verdict.reason.startswith("outline joined a neighbour's through its window (0 frames merged, 0.100 s")
     assert beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), shapes).label == "normal"
+
+
+def merged_around_the_point(shapes, threshold: float, before: int = 4, past: int | None = 2) -> GradedFillet:
+    """The verdict of a fillet merged with its side neighbour from ``before`` frames before the first frame past its
+    measuring point to ``past`` frames after that one (to its last frame with None): too far apart for the frames
+    left to read the point."""
+    ((_, alone),) = feed(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 0, shapes)
+    frames = alone.shape.trace + alone.shape.extra_trace
+    point = round(next(f for f in frames if f.overhang >= alone.shape.line_fraction).stamp * FPS)
+    last = len(shapes) if past is None else point + past
+    merged = [widened(c) if point - before <= i < last else c for i, c in enumerate(shapes)]
+    ((_, verdict),) = feed(FilletGrader(EDGE, GradingRules(threshold=threshold)), 1, 0, merged)
+    return verdict
+
+
+def test_a_fillet_merged_around_its_measuring_point_is_graded_when_the_frames_around_it_bound_its_score():
+    shapes = contours(90, bend=0.4)
+    gap = merged_around_the_point(shapes, threshold=1.0)
+    low, high = gap.shape.line_bounds
+    assert 0.0 < low < high < math.inf
+    for threshold, label, score in ((1.01 * high, "woody", high), (0.99 * low, "normal", low)):
+        verdict = merged_around_the_point(shapes, threshold)
+        assert verdict.label == label and verdict.scored and verdict.score == score
+        assert verdict.reason == REASON_BOUND.format(low, high)
+    between = merged_around_the_point(shapes, threshold=0.5 * (low + high))
+    assert between.label == "unscored" and between.reason.startswith("no clean frames around the measuring point")
+
+
+def test_a_fillet_merged_from_before_its_measuring_point_on_is_unscored_whatever_its_score_before_it():
+    """Blunt end first, the window closes before the measuring point: every frame from the close on merged, nothing
+    bounds the score from above."""
+    shapes = contours(90, bend=0.4, narrow_first=False)
+    ((_, alone),) = feed(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 0, shapes)
+    verdict = merged_around_the_point(shapes, threshold=0.01 * alone.score, before=1, past=None)
+    low, high = verdict.shape.line_bounds
+    assert 0.01 * alone.score < low and high == math.inf
+    assert verdict.label == "unscored" and verdict.reason.startswith("no clean frames around the measuring point")
 
 
 def test_a_sliver_lost_on_the_belt_beside_its_lane_fillet_gets_no_verdict_but_a_lost_fillet_does():

@@ -33,6 +33,7 @@ from woody_vision.shape_score import (
     ShapeEvaluator,
     ShapeResult,
     aspect_ratio,
+    bracket_at,
     clip_body,
     extrapolate_at,
     fill_rows,
@@ -667,6 +668,13 @@ def test_extrapolation_takes_the_nearer_side_within_a_frame_and_never_across_a_g
     assert math.isnan(extrapolate_at(trace((0.1, 1.0), (0.2, 2.0), (0.65, 8.0), (0.75, 9.0)), 0.5, 0.1)[0])
     assert extrapolate_at(trace((0.2, 1.0), (0.55, 6.0), (0.9, 8.0)), 0.5, 0.1)[1] is None
     assert extrapolate_at(trace((0.1, 0.1), (0.58, 0.2), (0.62, 3.0)), 0.5, 0.1) == (0.0, 1)  # never below 0
+
+
+def test_the_frames_on_either_side_of_a_point_bound_its_score_however_far_apart():
+    frames = rising_envelope(trace((0.1, 1.0), (0.3, 4.0), (0.8, 6.0), (0.9, 5.0)))
+    assert bracket_at(frames, 0.5) == (4.0, 5.0)  # the frame at 0.8 lowered to the one after it
+    assert bracket_at(frames, 0.05) == (0.0, 1.0) and bracket_at(frames, 0.95) == (5.0, math.inf)
+    assert bracket_at(frames, 0.3) == (4.0, 4.0)
 
 
 def test_a_frame_the_envelope_lowers_by_more_than_half_is_dropped_and_a_small_dip_is_kept():

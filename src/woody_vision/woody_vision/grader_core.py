@@ -51,6 +51,9 @@ out absent by the top camera's clock instead (a line without a side camera, a ba
 
 REASON_NO_SIDE = "side view absent: no whole side passage of this fillet ended within {:.1f} s of its window"
 
+REASON_BOUND = ("line score read as a bound: frames lost or merged around the measuring point, where Φ_t lies "
+                "between {:.2f} and {:.2f}")
+
 SIDE_MATCH_SLACK_S = 0.3
 """A side passage matches a top-down window closing up to this long before or after the passage."""
 
@@ -302,10 +305,10 @@ class FilletGrader:
     def _decide(self, track_id: int, result: ShapeResult, area_px: float = 0.0) -> list[GradedFillet]:
         lane = self._lanes.get(track_id, -1)
         bereft = track_id in self._bereft and result.reason == REASON_STARTED_PAST_EDGE
-        if bereft or self._is_fragment(lane, track_id, result, area_px):
+        graded = self._classify(track_id, lane, result)
+        if bereft or self._is_fragment(lane, track_id, graded.shape, area_px):
             self.fragments += 1
             return []
-        graded = self._classify(track_id, lane, result)
         if self.watched_lane is not None and lane == self.watched_lane:
             stamp = self.now if result.stamp is None else result.stamp
             self._pending.append(_Pending(track_id, lane, stamp, deadline=stamp + self.side_wait_s))
@@ -314,10 +317,11 @@ class FilletGrader:
     def _classify(self, track_id: int, lane: int, result: ShapeResult) -> GradedFillet:
         """The verdict of a finished window: scored and classified, or unscored with its reason."""
         paper = self.score == SCORE_PAPER
-        score = result.phi if paper else result.line_phi
-        usable = result.window_closed if paper else result.status == STATUS_SCORED
         conditions = FilletConditions(result.speed_px_s / self.pixels_per_metre, result.leading_end == LEADING_BLUNT,
                                       result.turn_deg, result.length_px / self.pixels_per_metre)
+        result = result if paper else self._bounded(result, conditions)
+        score = result.phi if paper else result.line_phi
+        usable = result.window_closed if paper else result.status == STATUS_SCORED
         if not (usable and math.isfinite(score)):
             return GradedFillet(track_id, lane, result, LABEL_UNSCORED, "", conditions=conditions)
         outside = self.fitted_range.outside(conditions) if self.fitted_range is not None else ""
@@ -331,6 +335,21 @@ class FilletGrader:
             return GradedFillet(track_id, lane, result, LABEL_UNSCORED, "", conditions=conditions)
         return GradedFillet(track_id, lane, result, decision.label, decision.grade or "", score=score,
                             conditions=conditions, threshold=decision.threshold)
+
+    def _bounded(self, result: ShapeResult, conditions: FilletConditions) -> ShapeResult:
+        """``result`` scored on a bound of its line score when no two frames read the measuring point but the
+        bounds alone decide (``ShapeResult.line_bounds``): a fillet whose Φ_t is below the cut on its first own
+        frame past the point is woody, and that score, at least its line score, is the one graded; one whose Φ_t
+        is above it on its last own frame before the point, and on a later own frame that confirms it, is normal.
+        Unchanged otherwise."""
+        low, high = result.line_bounds
+        if result.status == STATUS_SCORED or not math.isfinite(high):
+            return result
+        woody_high = self.rules.is_woody(high, conditions)
+        if woody_high or (low > 0.0 and not self.rules.is_woody(low, conditions)):
+            return replace(result, status=STATUS_SCORED, line_phi=high if woody_high else low,
+                           reason=REASON_BOUND.format(low, high))
+        return result
 
     def _adopted(self, track: TrackObservation, stamp: float) -> ShapeEvaluator | None:
         """The evaluation a new track carries on: that of a fillet of its lane whose own track lost it in this
@@ -356,7 +375,8 @@ class FilletGrader:
         """Whether an unscored result is a piece's (:meth:`_is_piece`): a track that ended as only a piece's does
         (PIECE_REASONS), with the blob's ``area_px``, or any unscored window whose flat reference outline was a
         piece's, with that outline's area (a split of two touching fillets gave a sliver a track of its own before
-        the edge; it opens a window it cannot score)."""
+        the edge; it opens a window it cannot score, or scores one outside the calibration: shorter, or turned
+        further, than any fillet)."""
         if result.reason in PIECE_REASONS:
             return self._is_piece(lane, track_id, area_px)
         piece_window = result.status == STATUS_UNSCORED and result.reference_contour is not None

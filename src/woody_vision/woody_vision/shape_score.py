@@ -373,6 +373,9 @@ class ShapeResult:
     """Whether the paper's window closed cleanly and without a gap, so that ``phi`` is the paper's Φ."""
     window_gap_s: float = 0.0
     """The longest step into a window frame that lost frames before it (s; 0 when none was lost)."""
+    line_bounds: tuple[float, float] = (0.0, math.inf)
+    """Where no two frames read the measuring point (REASON_LINE_GAP): the least and the most Φ_t there can be, the
+    rising envelope of the fillet's own frames before and past it however far apart (:func:`bracket_at`)."""
 
     @property
     def joined_at_line(self) -> bool:
@@ -543,6 +546,15 @@ def extrapolate_at(frames: list[FrameScore], fraction: float, step: float) -> tu
             slope = (b.phi - a.phi) / (b.overhang - a.overhang)
             best = (distance, max(0.0, a.phi + slope * (fraction - a.overhang)), near)
     return best[1], best[2]
+
+
+def bracket_at(frames: list[FrameScore], fraction: float) -> tuple[float, float]:
+    """The range Φ_t at the overhang ``fraction`` lies in, on a rising envelope ``frames`` however far apart they
+    are: at least the last frame's at or before it (0 without one: Φ_t is never below 0), at most the first's at or
+    past it (inf without one)."""
+    before = [f.phi for f in frames if f.overhang <= fraction and math.isfinite(f.phi)]
+    after = [f.phi for f in frames if f.overhang >= fraction and math.isfinite(f.phi)]
+    return (before[-1] if before else 0.0), (after[0] if after else math.inf)
 
 
 def turn_deg(contour: np.ndarray) -> float:
@@ -850,7 +862,8 @@ class ShapeEvaluator:
         if nearer is None or not math.isfinite(line_phi) or is_gap(gap, step):
             line_phi, nearer = extrapolate_at(own, self.line_fraction, step)
         if nearer is None or not math.isfinite(line_phi):
-            return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected))
+            return self._finish(STATUS_UNSCORED, REASON_LINE_GAP.format(self.line_fraction, self._rejected),
+                                line_bounds=bracket_at(own, self.line_fraction))
         reason = REASON_WINDOW_GAP.format(self._window_gap) if self._window_gap else ""
         nearer = kept[nearer]
         return self._finish(STATUS_SCORED, reason, line_phi, self._contours[nearer], frames[nearer].stamp)
@@ -948,7 +961,7 @@ class ShapeEvaluator:
 
     def _finish(self, status: str, reason: str, line_phi: float = math.nan,
                 line_contour: np.ndarray | None = None, line_stamp: float | None = None,
-                stamp: float | None = None) -> ShapeResult:
+                stamp: float | None = None, line_bounds: tuple[float, float] = (0.0, math.inf)) -> ShapeResult:
         self._phase = _Phase.DONE
         referenced = self._reference is not None
         complete = self._closed and not self._window_gap
@@ -978,6 +991,7 @@ class ShapeEvaluator:
             extra_trace=tuple(self._extra),
             window_closed=complete,
             window_gap_s=self._window_gap,
+            line_bounds=line_bounds,
         )
 
 
