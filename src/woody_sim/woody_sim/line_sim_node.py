@@ -33,7 +33,7 @@ from tf2_msgs.msg import TFMessage
 
 from woody_common import topics
 from woody_common.diagnostics import OK, WARN, DiagnosticsPublisher, Health
-from woody_common.images import image_message
+from woody_common.images import serialized_image
 from woody_common.line import (
     BELT_MARGIN_M,
     CLASS_K,
@@ -523,16 +523,16 @@ class LineSim(Node):
             color_header = self._header(topics.TOP_FRAME, self._color_stamp(stamp))
             depth = to_message_array(self.sensor.depth(frames.top_depth, self.sensor_rng), self.depth_encoding,
                                      self.depth_unit_m)
-            self.color_pub.publish(image_message(self.sensor.color(frames.top_rgb, self.sensor_rng), "rgb8",
-                                                 color_header))
-            self.depth_pub.publish(image_message(depth, self.depth_encoding, header))
+            color = self.sensor.color(frames.top_rgb, self.sensor_rng)
+            self.color_pub.publish(serialized_image(color, "rgb8", color_header))
+            self.depth_pub.publish(serialized_image(depth, self.depth_encoding, header))
             self.top_info.header = color_header
             self.color_info_pub.publish(self.top_info)
             self.top_info.header = header
             self.depth_info_pub.publish(self.top_info)
         if frames.side_rgb is not None:
             header = self._header(topics.SIDE_FRAME, stamp)
-            self.side_pub.publish(image_message(frames.side_rgb, "rgb8", header))
+            self.side_pub.publish(serialized_image(frames.side_rgb, "rgb8", header))
             self.side_info.header = header
             self.side_info_pub.publish(self.side_info)
 

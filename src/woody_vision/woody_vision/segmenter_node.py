@@ -31,7 +31,7 @@ from std_msgs.msg import Empty
 
 from woody_common import topics
 from woody_common.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher, Health
-from woody_common.images import image_message
+from woody_common.images import serialized_image
 from woody_common.line import (
     DEPTH_UNIT_M,
     LANE_PITCH_M,
@@ -339,7 +339,7 @@ class Segmenter(Node):
             label = f"{track.track_id} L{track.lane}" + (f" {score}" if score is not None else "")
             u, v = (int(c) for c in track.blob.centroid)
             cv2.putText(canvas, label, (u - 20, v), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1)
-        self.debug_pub.publish(image_message(canvas, "rgb8", depth_msg.header))
+        self.debug_pub.publish(serialized_image(canvas, "rgb8", depth_msg.header))
 
     def close(self) -> None:
         print(f"[segmenter] {self.frames} depth frames received, {self.checker.rejected} rejected"

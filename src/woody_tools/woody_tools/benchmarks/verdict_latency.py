@@ -116,7 +116,7 @@ def _publish_frames(scene, seconds: float, loop_s: float, publishers, published:
     from sensor_msgs.msg import CameraInfo
     from std_msgs.msg import Header
 
-    from woody_common.images import image_message
+    from woody_common.images import serialized_image
 
     clock_pub, info_pub, depth_pub = publishers
     info = CameraInfo(width=scene.width, height=scene.height, distortion_model="plumb_bob")
@@ -131,7 +131,7 @@ def _publish_frames(scene, seconds: float, loop_s: float, publishers, published:
         clock_pub.publish(clock)
         info.header.stamp = clock.clock
         info_pub.publish(info)
-        image = image_message(np.asarray(depth, np.float32), "32FC1", Header(stamp=clock.clock))
+        image = serialized_image(np.asarray(depth, np.float32), "32FC1", Header(stamp=clock.clock))
         published[key] = time.monotonic()
         depth_pub.publish(image)
         time.sleep(max(0.0, start + (i + 1) / FRAME_RATE_HZ - time.monotonic()))
