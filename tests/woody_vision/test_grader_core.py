@@ -191,6 +191,24 @@ def test_a_sliver_that_opened_a_window_beside_its_lanes_fillet_gets_no_verdict_b
     assert alone.shape.reason not in PIECE_REASONS
 
 
+def test_a_whole_fillet_unscored_beside_a_lane_mate_joined_to_its_neighbour_gets_its_verdict():
+    """Lane 0's track 1 is two touching fillets' joined blob, 2.4 times a fillet's area; track 2, a whole fillet of
+    that lane, ends inside its window. Against fillets of other lanes, track 1's outline is no fillet's size."""
+    def whole_fillet_verdicts(others: int) -> list[GradedFillet]:
+        grader, out, ended = FilletGrader(EDGE, GradingRules(threshold=1.0)), [], False
+        for i, contour in enumerate(contours(60)):
+            seen, beside = contour[:, 1].max() < EDGE + 12, contour + np.int32([200, 0])
+            observed = [TrackObservation(1, 0, widened(contour, 2.4))]
+            observed += [TrackObservation(2 + lane, lane, beside) for lane in range(1, others + 1)]
+            observed += [TrackObservation(2, 0, contour + np.int32([-200, 0]))] if seen else []
+            out += grader.on_tracks(i / FPS, observed, ended_ids=[2] if not (seen or ended) else [])
+            ended = ended or not seen
+        return [g for g in out if g.fillet_id == 2]
+    (verdict,) = whole_fillet_verdicts(others=2)
+    assert verdict.label == "unscored" and verdict.reason == REASON_LOST_IN_WINDOW
+    assert whole_fillet_verdicts(others=0) == []  # nothing tells the joined blob from a fillet: a piece of it
+
+
 def test_a_sliver_that_scored_a_window_outside_the_calibration_beside_its_lanes_fillet_gets_no_verdict():
     """Its score would make it unscored (a sliver is shorter than any fillet the cuts were fitted on, or turned
     past them): a piece, like a sliver whose window did not close."""
