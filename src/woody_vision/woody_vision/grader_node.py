@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 from foxglove_msgs.msg import ImageAnnotations
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
 
 from woody_common import topics
@@ -69,6 +69,7 @@ from woody_vision.image_encodings import color_rgb
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.mount_watch import MountWatch
 from woody_vision.overlays import FRAME, Overlay, outline, verdict_overlays
+from woody_vision.result_qos import results_qos
 from woody_vision.shape_score import LINE_OVERHANG_FRACTION, TIP_WIDTH_RATIO, W1, W2
 from woody_vision.side_view import SidePassageTracker
 from woody_vision.verdict_message import verdict_message
@@ -119,10 +120,9 @@ class Grader(Node):
                            "measuring point, labelled with score and cut) for Foxglove and `woody report`.")
         self.labels: dict[int, str] = {}
 
-        reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         sensor = declare_image_qos(self)
-        self.verdict_pub = self.create_publisher(FilletVerdict, topics.VERDICTS, reliable)
-        self.side_pub = self.create_publisher(SideMetrics, topics.SIDE_METRICS, reliable) if self.side else None
+        self.verdict_pub = self.create_publisher(FilletVerdict, topics.VERDICTS, results_qos())
+        self.side_pub = self.create_publisher(SideMetrics, topics.SIDE_METRICS, results_qos()) if self.side else None
         self.annotation_pub = (self.create_publisher(ImageAnnotations, topics.ANNOTATIONS, 50) if annotate
                                else None)
         self.create_subscription(CameraInfo, topics.TOP_DEPTH_INFO, self.on_camera_info, sensor)

@@ -30,6 +30,7 @@ from woody_common.stamps import seconds_to_stamp, stamp_to_seconds
 from woody_msgs.msg import FilletVerdict, GateCommand
 from woody_vision.frame_checks import SimTimeWatch, watch_clock
 from woody_vision.gate_timing import GATE_DISTANCE_M, GateTiming
+from woody_vision.result_qos import RESULTS_DEPTH, results_qos
 
 
 class RejectGate(Node):
@@ -53,9 +54,9 @@ class RejectGate(Node):
         self.diverted = 0
         self.late = 0
         self.passed = 0
-        reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        self.publisher = self.create_publisher(GateCommand, topics.GATE_COMMANDS, reliable)
-        self.create_subscription(FilletVerdict, topics.VERDICTS, self.on_verdict, reliable)
+        self.publisher = self.create_publisher(GateCommand, topics.GATE_COMMANDS, results_qos())
+        verdicts = QoSProfile(depth=RESULTS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)  # volatile: new ones only
+        self.create_subscription(FilletVerdict, topics.VERDICTS, self.on_verdict, verdicts)
         self.sim_time = SimTimeWatch()
         self.clock_jumps = watch_clock(self, self.sim_time, self.time_went_back)
         self.diagnostics = DiagnosticsPublisher(self, self.health)
