@@ -169,14 +169,16 @@ def test_a_piece_split_off_past_the_edge_gets_no_verdict_but_a_fillet_appearing_
     assert alone.label == "unscored" and alone.shape.reason == REASON_STARTED_PAST_EDGE
 
 
-def sliver_window(grader: FilletGrader, lane: int, past_edge_px: float = 12.0) -> list[GradedFillet]:
+def sliver_window(grader: FilletGrader, lane: int, past_edge_px: float = 12.0,
+                  merged: frozenset[int] = frozenset()) -> list[GradedFillet]:
     """Track 2, a sliver a split gave a track of its own, rides beside lane 0's fillet (track 1) from before the
-    edge until its track ends with its front ``past_edge_px`` past the edge (inside its window by default); track 1
-    goes on."""
+    edge until its track ends with its front ``past_edge_px`` past the edge (inside its window by default), merged
+    with a neighbour in the ``merged`` frames; track 1 goes on."""
     out, ended = [], False
     for i, contour in enumerate(contours(60)):
         sliver = np.round(teardrop_polygon((380.0, contour[:, 1].min() + 30.0), 30.0, 16.0)).astype(np.int32)
         seen = sliver[:, 1].max() < EDGE + past_edge_px
+        sliver = widened(sliver) if i in merged else sliver
         observed = [TrackObservation(1, 0, contour)] + ([TrackObservation(2, lane, sliver)] if seen else [])
         out += grader.on_tracks(i / FPS, observed, ended_ids=[2] if not (seen or ended) else [])
         ended = ended or not seen
@@ -189,6 +191,17 @@ def test_a_sliver_that_opened_a_window_beside_its_lanes_fillet_gets_no_verdict_b
     (alone,) = sliver_window(FilletGrader(EDGE, GradingRules(threshold=1.0)), lane=1)
     assert alone.label == "unscored" and alone.shape.reference_contour is not None  # no fillet in its lane: heard
     assert alone.shape.reason not in PIECE_REASONS
+
+
+def test_a_sliver_whose_window_is_read_as_a_bound_beside_its_lanes_fillet_gets_no_verdict():
+    (scored,) = sliver_window(FilletGrader(EDGE, GradingRules(threshold=1.0)), lane=1, past_edge_px=40.0)
+    frames = scored.shape.trace + scored.shape.extra_trace
+    point = round(next(f for f in frames if f.overhang >= scored.shape.line_fraction).stamp * FPS)
+    merged = frozenset(range(point - 4, point + 2))  # too far apart to read the point, but its Φ_t is ~0: woody
+    (alone,) = sliver_window(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 40.0, merged)
+    assert alone.label == "woody" and alone.reason.startswith("line score read as a bound")
+    beside = FilletGrader(EDGE, GradingRules(threshold=1.0))
+    assert sliver_window(beside, 0, 40.0, merged) == [] and beside.fragments == 1
 
 
 def test_a_whole_fillet_unscored_beside_a_lane_mate_joined_to_its_neighbour_gets_its_verdict():

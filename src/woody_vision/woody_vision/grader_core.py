@@ -306,7 +306,7 @@ class FilletGrader:
         lane = self._lanes.get(track_id, -1)
         bereft = track_id in self._bereft and result.reason == REASON_STARTED_PAST_EDGE
         graded = self._classify(track_id, lane, result)
-        if bereft or self._is_fragment(lane, track_id, graded.shape, area_px):
+        if bereft or self._is_fragment(lane, track_id, result, graded, area_px):
             self.fragments += 1
             return []
         if self.watched_lane is not None and lane == self.watched_lane:
@@ -371,15 +371,18 @@ class FilletGrader:
         self._bereft.add(owner)
         return self._evaluators.pop(owner)
 
-    def _is_fragment(self, lane: int, track_id: int, result: ShapeResult, area_px: float) -> bool:
-        """Whether an unscored result is a piece's (:meth:`_is_piece`): a track that ended as only a piece's does
-        (PIECE_REASONS), with the blob's ``area_px``, or any unscored window whose flat reference outline was a
-        piece's, with that outline's area (a split of two touching fillets gave a sliver a track of its own before
-        the edge; it opens a window it cannot score, or scores one outside the calibration: shorter, or turned
-        further, than any fillet)."""
+    def _is_fragment(self, lane: int, track_id: int, result: ShapeResult, graded: GradedFillet,
+                     area_px: float) -> bool:
+        """Whether a result is a piece's (:meth:`_is_piece`): a track that ended as only a piece's does
+        (PIECE_REASONS), with the blob's ``area_px``, or any window whose flat reference outline was a piece's, with
+        that outline's area, that its evaluator left unscored or its verdict (``graded``) is (a split of two
+        touching fillets gave a sliver a track of its own before the edge; it opens a window it cannot score, or
+        scores one outside the calibration: shorter, or turned further, than any fillet). A piece's window read
+        as a bound is still a piece's."""
         if result.reason in PIECE_REASONS:
             return self._is_piece(lane, track_id, area_px)
-        piece_window = result.status == STATUS_UNSCORED and result.reference_contour is not None
+        unscored = result.status == STATUS_UNSCORED or not graded.scored
+        piece_window = unscored and result.reference_contour is not None
         return piece_window and self._is_piece(lane, track_id, _area(result.reference_contour))
 
     def _is_piece(self, lane: int, track_id: int, area_px: float) -> bool:
