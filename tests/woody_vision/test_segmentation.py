@@ -19,6 +19,7 @@ from woody_vision.segmentation import (
     BackgroundModel,
     Blob,
     SegmentationParams,
+    _split_by_tracks,
     height_map,
     segment_depth,
     segment_height_map,
@@ -501,6 +502,26 @@ def test_a_slivers_prior_or_two_priors_of_one_fillet_never_split_it():
     halves = [rectangle(100, 50, 30, 100), rectangle(130, 50, 30, 100)]  # no growth past the larger: one fillet
     assert len(segment_mask(mask, height, SegmentationParams(), [whole, *halves])) == 1
     assert len(segment_mask(mask, height, SegmentationParams(), [rectangle(10, 10, 20, 20)] * 2)) == 1
+
+
+def test_a_geometric_split_through_a_tracked_fillet_is_overruled_by_the_priors():
+    """Three fillets side by side entering as one blob, parted through the middle one by its notches: each
+    tracked fillet's prior gets its own piece, not half of the middle one; a prior longer than one fillet (a track
+    that followed two joined end to end) does not overrule the cut."""
+    block = np.zeros((200, 300), np.uint8)
+    fillets = [rectangle(100, 50, 40, 100), rectangle(140, 50, 40, 100), rectangle(180, 50, 40, 100)]
+    cv2.fillPoly(block, fillets, 255)
+    component, origin = block[49:151, 99:221].copy(), (99, 49)
+    halves = [np.zeros_like(component) for _ in range(2)]
+    halves[0][:, :61], halves[1][:, 61:] = component[:, :61], component[:, 61:]  # cut at column 160
+    params = SegmentationParams(split_width_px=50.0, split_length_px=150.0, split_area_px=6000.0)
+    pieces = _split_by_tracks(component, [(h, None) for h in halves], fillets, origin, params)
+    assert len(pieces) == 3
+    areas = sorted(cv2.countNonZero(mask) for mask, _ in pieces)
+    assert all(abs(area - 4000) < 400 for area in areas), areas
+    long_track = [rectangle(140, 50, 40, 160)]  # longer than split_length_px: two fillets joined
+    kept = _split_by_tracks(component, [(h, None) for h in halves], [fillets[0], *long_track], origin, params)
+    assert sorted(cv2.countNonZero(m) for m, _ in kept) == sorted(cv2.countNonZero(h) for h in halves)
 
 
 def test_a_fillet_reaching_the_one_hanging_ahead_of_it_is_split_from_it():

@@ -341,7 +341,7 @@ def segment_mask(mask: np.ndarray | None, height: np.ndarray, params: Segmentati
         height_roi = _pad(height[y0:y1, x0:x1])
         parts = _split_component(component, height_roi, params)
         if params.split_by_tracks:
-            parts = [piece for part in parts for piece in _split_by_priors(part, priors, origin)]
+            parts = _split_by_tracks(component, parts, priors, origin, params)
         for mask_roi, contour in parts:
             blob = _make_blob(mask_roi, contour, height_roi, origin, params.min_area_px)
             if blob is not None:
@@ -468,6 +468,38 @@ def _split_by_priors(part: tuple[np.ndarray, np.ndarray | None], priors: Sequenc
     return _region_masks(labels, range(1, len(held) + 1))
 
 
+def _split_by_tracks(component: np.ndarray, parts: list[tuple[np.ndarray, np.ndarray | None]],
+                     priors: Sequence[np.ndarray], origin: tuple[int, int],
+                     params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """The component's parts, each split into the tracked fillets merged in it (:func:`_split_by_priors`).
+
+    A geometric split that cuts the prior of one tracked fillet into two parts is overruled: three fillets that
+    enter the image side by side join into one blob whose notches part it through the middle one, which would
+    then be tracked as two halves, each given a verdict. The whole component is split from the priors instead.
+    """
+    if len(parts) > 1 and _cuts_a_prior(parts, priors, origin, params):
+        tracked = _split_by_priors((component, None), priors, origin)
+        if len(tracked) > 1:
+            parts = tracked
+    return [piece for part in parts for piece in _split_by_priors(part, priors, origin)]
+
+
+def _cuts_a_prior(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], priors: Sequence[np.ndarray],
+                  origin: tuple[int, int], params: SegmentationParams) -> bool:
+    """Whether two of the parts each hold PRIOR_CUT_SHARE of a prior that can be one fillet (no wider, longer or
+    larger than one lies; a track that followed two fillets joined end to end is rightly cut)."""
+    for prior in priors:
+        area = cv2.contourArea(prior)
+        _, _, width, length = cv2.boundingRect(prior)
+        if not 0.0 < area <= params.split_area_px or width > params.split_width_px or length > params.split_length_px:
+            continue
+        filled = [_filled(prior, origin, part[0].shape) for part in parts]
+        shares = [cv2.countNonZero(cv2.bitwise_and(f, part[0])) / area for f, part in zip(filled, parts)]
+        if sum(share >= PRIOR_CUT_SHARE for share in shares) >= 2:
+            return True
+    return False
+
+
 def _shared(start: int, length: int, other_start: int, other_length: int) -> int:
     """How much two spans of pixels overlap (negative: the gap between them)."""
     return min(start + length, other_start + other_length) - max(start, other_start)
@@ -514,6 +546,8 @@ PRIOR_OVERLAP = 0.5
 """A blob holds a tracked fillet's prior outline when it covers this fraction of the prior's area."""
 PRIOR_AREA_RATIO = 0.3
 """Priors smaller than this fraction of the largest one a blob holds are slivers and split nothing."""
+PRIOR_CUT_SHARE = 0.25
+"""A geometric split cuts a prior when two of its parts each cover this fraction of the prior's area."""
 MERGE_AREA_RATIO = 1.25
 """A blob holding several priors is split only when it is this much larger than the largest of them."""
 PRIOR_ERODE_PX = 5
