@@ -515,13 +515,33 @@ def test_a_geometric_split_through_a_tracked_fillet_is_overruled_by_the_priors()
     halves = [np.zeros_like(component) for _ in range(2)]
     halves[0][:, :61], halves[1][:, 61:] = component[:, :61], component[:, 61:]  # cut at column 160
     params = SegmentationParams(split_width_px=50.0, split_length_px=150.0, split_area_px=6000.0)
-    pieces = _split_by_tracks(component, [(h, None) for h in halves], fillets, origin, params)
+    pieces = _split_by_tracks([(h, None) for h in halves], fillets, origin, params)
     assert len(pieces) == 3
     areas = sorted(cv2.countNonZero(mask) for mask, _ in pieces)
     assert all(abs(area - 4000) < 400 for area in areas), areas
     long_track = [rectangle(140, 50, 40, 160)]  # longer than split_length_px: two fillets joined
-    kept = _split_by_tracks(component, [(h, None) for h in halves], [fillets[0], *long_track], origin, params)
+    kept = _split_by_tracks([(h, None) for h in halves], [fillets[0], *long_track], origin, params)
     assert sorted(cv2.countNonZero(m) for m, _ in kept) == sorted(cv2.countNonZero(h) for h in halves)
+
+
+def test_only_the_parts_that_cut_a_prior_are_split_again_from_the_priors():
+    """Three fillets side by side, the middle one parted by the geometry into two parts: those two are joined and
+    split from the priors, while the right fillet keeps its clean part although its track's prior holds a piece of
+    the middle one (the track took it as they entered), so the piece does not stay with it."""
+    block = np.zeros((200, 300), np.uint8)
+    fillets = [rectangle(100, 50, 40, 100), rectangle(140, 50, 40, 100), rectangle(180, 50, 40, 100)]
+    cv2.fillPoly(block, fillets, 255)
+    component, origin = block[49:151, 99:221].copy(), (99, 49)
+    parts = [np.zeros_like(component) for _ in range(3)]
+    for part, (first, last) in zip(parts, ((0, 61), (61, 81), (81, None))):  # cut at columns 160 and 180
+        part[:, first:last] = component[:, first:last]
+    with_piece = np.array([[180, 50], [219, 50], [219, 149], [160, 149], [160, 100], [180, 100]], np.int32)
+    params = SegmentationParams(split_width_px=50.0, split_length_px=150.0, split_area_px=6000.0)
+    pieces = _split_by_tracks([(p, None) for p in parts], [*fillets[:2], with_piece], origin, params)
+    assert len(pieces) == 3
+    right = max(pieces, key=lambda piece: cv2.boundingRect(piece[0])[0])[0]
+    assert cv2.countNonZero(cv2.bitwise_xor(right, parts[2])) == 0
+    assert all(abs(cv2.countNonZero(mask) - 4000) < 400 for mask, _ in pieces)
 
 
 def test_a_fillet_reaching_the_one_hanging_ahead_of_it_is_split_from_it():

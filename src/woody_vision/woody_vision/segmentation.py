@@ -341,7 +341,7 @@ def segment_mask(mask: np.ndarray | None, height: np.ndarray, params: Segmentati
         height_roi = _pad(height[y0:y1, x0:x1])
         parts = _split_component(component, height_roi, params)
         if params.split_by_tracks:
-            parts = _split_by_tracks(component, parts, priors, origin, params)
+            parts = _split_by_tracks(parts, priors, origin, params)
         for mask_roi, contour in parts:
             blob = _make_blob(mask_roi, contour, height_roi, origin, params.min_area_px)
             if blob is not None:
@@ -360,9 +360,8 @@ def _split_component(component: np.ndarray, height: np.ndarray,
     """Masks of the fillets in one connected component (itself if it looks like one fillet), each with its
     outline when already known (None: to be traced)."""
     contour = _largest_contour(component)
-    hull_area = cv2.contourArea(cv2.convexHull(contour))
-    solid = hull_area <= 0.0 or cv2.contourArea(contour) / hull_area >= params.split_solidity
-    parts = (None if solid else _split_by_distance(component, contour, params)) or [(component, contour)]
+    parts = (None if _solid(contour, params) else _split_by_distance(component, contour, params)) \
+        or [(component, contour)]
     wide = [piece for part in parts for piece in _split_if_wide(part, height, params)]
     return [piece for part in wide for piece in _split_if_long(part, height, params)]
 
@@ -468,36 +467,51 @@ def _split_by_priors(part: tuple[np.ndarray, np.ndarray | None], priors: Sequenc
     return _region_masks(labels, range(1, len(held) + 1))
 
 
-def _split_by_tracks(component: np.ndarray, parts: list[tuple[np.ndarray, np.ndarray | None]],
-                     priors: Sequence[np.ndarray], origin: tuple[int, int],
-                     params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
-    """The component's parts, each split into the tracked fillets merged in it (:func:`_split_by_priors`).
+def _split_by_tracks(parts: list[tuple[np.ndarray, np.ndarray | None]], priors: Sequence[np.ndarray],
+                     origin: tuple[int, int], params: SegmentationParams) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """A component's parts, each split into the tracked fillets merged in it (:func:`_split_by_priors`).
 
     A geometric split that cuts the prior of one tracked fillet into two parts is overruled: three fillets that
     enter the image side by side join into one blob whose notches part it through the middle one, which would
-    then be tracked as two halves, each given a verdict. The whole component is split from the priors instead.
+    then be tracked as two halves, each given a verdict. The parts that cut a prior are joined again and split
+    from the priors instead (one fillet when that prior is the only one they hold); the other parts stand.
+    Splitting the whole component from its priors would also cut a fillet the geometry parted cleanly, by the
+    prior of a track that took a piece of its neighbour as they entered, and keep that piece with it frame after
+    frame.
     """
-    if len(parts) > 1 and _cuts_a_prior(parts, priors, origin, params):
-        tracked = _split_by_priors((component, None), priors, origin)
-        if len(tracked) > 1:
-            parts = tracked
-    return [piece for part in parts for piece in _split_by_priors(part, priors, origin)]
+    kept = []
+    for group in _cut_groups(parts, priors, origin, params):
+        if len(group) == 1:
+            kept += _split_by_priors(parts[group[0]], priors, origin)
+        else:
+            kept += _split_by_priors((np.bitwise_or.reduce([parts[i][0] for i in group]), None), priors, origin)
+    return kept
 
 
-def _cuts_a_prior(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], priors: Sequence[np.ndarray],
-                  origin: tuple[int, int], params: SegmentationParams) -> bool:
-    """Whether two of the parts each hold PRIOR_CUT_SHARE of a prior that can be one fillet (no wider, longer or
-    larger than one lies; a track that followed two fillets joined end to end is rightly cut)."""
+def _cut_groups(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], priors: Sequence[np.ndarray],
+                origin: tuple[int, int], params: SegmentationParams) -> list[list[int]]:
+    """The parts' indices in groups joined by the priors they cut: two parts that each hold PRIOR_CUT_SHARE of a
+    prior that can be one fillet (no wider, longer or larger than one lies; a track that followed two fillets
+    joined end to end is rightly cut) are in one group."""
+    groups = [{i} for i in range(len(parts))]
     for prior in priors:
         area = cv2.contourArea(prior)
-        _, _, width, length = cv2.boundingRect(prior)
-        if not 0.0 < area <= params.split_area_px or width > params.split_width_px or length > params.split_length_px:
+        if not 0.0 < area <= params.split_area_px or cv2.boundingRect(prior)[3] > params.split_length_px \
+                or not _solid(prior, params):
             continue
         filled = [_filled(prior, origin, part[0].shape) for part in parts]
-        shares = [cv2.countNonZero(cv2.bitwise_and(f, part[0])) / area for f, part in zip(filled, parts)]
-        if sum(share >= PRIOR_CUT_SHARE for share in shares) >= 2:
-            return True
-    return False
+        cut = {i for i, (f, part) in enumerate(zip(filled, parts))
+               if cv2.countNonZero(cv2.bitwise_and(f, part[0])) >= PRIOR_CUT_SHARE * area}
+        if len(cut) >= 2:
+            touched = [g for g in groups if g & cut]
+            groups = [g for g in groups if not g & cut] + [set().union(*touched)]
+    return sorted(sorted(g) for g in groups)
+
+
+def _solid(contour: np.ndarray, params: SegmentationParams) -> bool:
+    """Whether an outline covers ``split_solidity`` of its convex hull (one fillet; less: maybe several)."""
+    hull_area = cv2.contourArea(cv2.convexHull(contour))
+    return hull_area <= 0.0 or cv2.contourArea(contour) / hull_area >= params.split_solidity
 
 
 def _shared(start: int, length: int, other_start: int, other_length: int) -> int:
