@@ -491,21 +491,21 @@ def _split_by_tracks(parts: list[tuple[np.ndarray, np.ndarray | None]], priors: 
 def _cut_groups(parts: Sequence[tuple[np.ndarray, np.ndarray | None]], priors: Sequence[np.ndarray],
                 origin: tuple[int, int], params: SegmentationParams) -> list[list[int]]:
     """The parts' indices in groups joined by the priors they cut: two parts that each hold PRIOR_CUT_SHARE of a
-    prior that can be one fillet (no wider, longer or larger than one lies; a track that followed two fillets
-    joined end to end is rightly cut) are in one group."""
+    prior that can be one fillet (solid, no longer or larger than one lies; a track that followed two fillets
+    joined end to end is rightly cut, and a turned fillet lies wider than a straight one) are in one group."""
     groups = [{i} for i in range(len(parts))]
     for prior in priors:
         area = cv2.contourArea(prior)
         if not 0.0 < area <= params.split_area_px or cv2.boundingRect(prior)[3] > params.split_length_px \
                 or not _solid(prior, params):
             continue
-        filled = [_filled(prior, origin, part[0].shape) for part in parts]
-        cut = {i for i, (f, part) in enumerate(zip(filled, parts))
-               if cv2.countNonZero(cv2.bitwise_and(f, part[0])) >= PRIOR_CUT_SHARE * area}
+        filled = _filled(prior, origin, parts[0][0].shape)  # every part is a mask of the component's ROI
+        cut = {i for i, (mask, _) in enumerate(parts)
+               if cv2.countNonZero(cv2.bitwise_and(filled, mask)) >= PRIOR_CUT_SHARE * area}
         if len(cut) >= 2:
             touched = [g for g in groups if g & cut]
             groups = [g for g in groups if not g & cut] + [set().union(*touched)]
-    return sorted(sorted(g) for g in groups)
+    return [sorted(g) for g in groups]
 
 
 def _solid(contour: np.ndarray, params: SegmentationParams) -> bool:
