@@ -48,7 +48,8 @@ writer thread builds, compresses (zstd releases the GIL) and writes chunks, so
 compression and disk I/O use the second core. SIGINT/SIGTERM finish the file
 (summary and indexes) and log one line: messages, MB on disk (compressed), and per
 topic written/published (``/?`` when several publishers share it), naming what was
-lost (a gap in the publisher's sequence numbers: lost in transport, or dropped
+lost (a gap in the publisher's sequence numbers, so a lost tail counts once a later
+message of that publisher arrives: lost in transport, or dropped
 because more than ``max_buffer_mb`` was unwritten; the callbacks never wait for
 the writer, so the middleware never holds more than ``queue_depth`` per topic
 for the recorder); the losses per topic
