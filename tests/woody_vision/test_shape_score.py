@@ -8,6 +8,7 @@ profile (and so the expected cut) is known exactly.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -675,6 +676,9 @@ def test_the_frames_on_either_side_of_a_point_bound_its_score_however_far_apart(
     assert bracket_at(frames, 0.5) == (4.0, 5.0)  # the frame at 0.8 lowered to the one after it
     assert bracket_at(frames, 0.05) == (0.0, 1.0) and bracket_at(frames, 0.95) == (5.0, math.inf)
     assert bracket_at(frames, 0.3) == (4.0, 4.0)
+    joined = [replace(f, joined=f.overhang == 0.3) for f in frames]
+    assert bracket_at(joined, 0.5) == (1.0, 5.0), "a joined frame bounds the score from above only"
+    assert bracket_at(joined, 0.2) == (1.0, 4.0)
 
 
 def test_a_frame_the_envelope_lowers_by_more_than_half_is_dropped_and_a_small_dip_is_kept():
