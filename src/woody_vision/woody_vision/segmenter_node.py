@@ -55,7 +55,6 @@ from woody_vision.image_encodings import color_rgb, depth_metres, match_size
 from woody_vision.image_qos import declare_image_qos
 from woody_vision.mount_watch import MountWatch
 from woody_vision.segmentation import (
-    DEFAULT_HEIGHT_THRESHOLD_M,
     HEIGHT_CORE_RATIO,
     BackgroundModel,
     SegmentationParams,
@@ -114,27 +113,32 @@ class Segmenter(Node):
         self.diagnostics = DiagnosticsPublisher(self, self.health)
 
     def _declare_segmentation(self) -> SegmentationParams:
-        """The segmentation's parameters (woody_vision.segmentation.SegmentationParams), declared."""
+        """The segmentation's parameters (woody_vision.segmentation.SegmentationParams), declared with its
+        defaults."""
+        defaults = SegmentationParams()
         return SegmentationParams(
-            height_threshold_m=declare(self, "height_threshold_m", DEFAULT_HEIGHT_THRESHOLD_M, "Height above the "
+            height_threshold_m=declare(self, "height_threshold_m", defaults.height_threshold_m, "Height above the "
                                        "belt background that counts as fillet (m).", 0.0005, 0.1),
-            min_area_px=declare(self, "min_area_px", 500, "Blobs smaller than this are dropped (px).", 1, 100000),
-            fill_invalid_px=declare(self, "fill_invalid_px", 0, "Pixels without depth take the mean height of the "
-                                    "valid ones within this radius (px; 0 = off; 4 for a real camera).", 0, 50),
-            median_px=declare(self, "median_px", 0, "Median filter of the height map: 0 (off), 3 or 5 (a noisy "
-                              "real camera).", 0, 5),
-            blur_px=declare(self, "blur_px", 0.0, "Gaussian sigma smoothing the height map after the median (px; 0 = "
-                            "off; 1.0 for a real camera).", 0.0, 20.0),
-            color_threshold=declare(self, "color_threshold", 0.0, "Outline from the registered colour image: a "
-                                    "pixel near the depth mask whose colour differs from the empty belt's by more "
-                                    "than this is fillet (8-bit levels; 0 = off; 20 for a real camera).", 0.0, 255.0),
-            color_search_px=declare(self, "color_search_px", 8, "Colour refines the outline only this close to the "
-                                    "depth mask (px).", 0, 100),
-            split_by_tracks=declare(self, "split_by_tracks", segmentation.SegmentationParams.split_by_tracks,
-                                    "Split a blob holding several tracked fillets (side by side, or a fillet and "
-                                    "the lane-mate hanging ahead) where the tracker predicts them: fewer unscored "
-                                    "fillets at the edge of a crowded line (docs/results.md)."),
-            height_core_floor=declare(self, "height_core_floor", HEIGHT_CORE_RATIO, "A blob wider than "
+            min_area_px=declare(self, "min_area_px", defaults.min_area_px, "Blobs smaller than this are dropped "
+                                "(px).", 1, 100000),
+            fill_invalid_px=declare(self, "fill_invalid_px", defaults.fill_invalid_px, "Pixels without depth take "
+                                    "the mean height of the valid ones within this radius (px; 0 = off; 4 for a "
+                                    "real camera).", 0, 50),
+            median_px=declare(self, "median_px", defaults.median_px, "Median filter of the height map: 0 (off), 3 "
+                              "or 5 (a noisy real camera).", 0, 5),
+            blur_px=declare(self, "blur_px", defaults.blur_px, "Gaussian sigma smoothing the height map after the "
+                            "median (px; 0 = off; 1.0 for a real camera).", 0.0, 20.0),
+            color_threshold=declare(self, "color_threshold", defaults.color_threshold, "Outline from the registered "
+                                    "colour image: a pixel near the depth mask whose colour differs from the empty "
+                                    "belt's by more than this is fillet (8-bit levels; 0 = off; 20 for a real "
+                                    "camera).", 0.0, 255.0),
+            color_search_px=declare(self, "color_search_px", defaults.color_search_px, "Colour refines the outline "
+                                    "only this close to the depth mask (px).", 0, 100),
+            split_by_tracks=declare(self, "split_by_tracks", defaults.split_by_tracks, "Split a blob holding several "
+                                    "tracked fillets (side by side, or a fillet and the lane-mate hanging ahead) "
+                                    "where the tracker predicts them: fewer unscored fillets at the edge of a "
+                                    "crowded line (docs/results.md)."),
+            height_core_floor=declare(self, "height_core_floor", defaults.height_core_floor, "A blob wider than "
                                       f"max_fillet_width_m is split at its thick middles, cut at {HEIGHT_CORE_RATIO:g}"
                                       " x its height and lower down to this: lower splits a thin fillet from a thick "
                                       "one, fewer unscored, more woody ones passed (docs/results.md).", 0.3,
