@@ -10,6 +10,7 @@ import pytest
 from woody_vision.frame_checks import GAP_FRAMES
 from woody_vision.grader_core import (
     JOINED_MARGIN_LN,
+    JOINED_MERGED_FRAMES,
     PIECE_REASONS,
     REASON_BOUND,
     REASON_NO_SIDE,
@@ -334,19 +335,30 @@ def widened(contour: np.ndarray, factor: float = 1.5) -> np.ndarray:
     return out
 
 
-def test_a_fillet_split_from_a_neighbour_far_above_its_cut_passes_after_merged_or_lost_frames():
-    """Frames rejected as merged, or lost, in the window of a fillet graded on split frames far above its cut do
-    not unscore it: the frames that set its score passed every check for a neighbour's piece."""
+def test_a_fillet_graded_normal_on_frames_split_from_a_neighbour_after_a_merged_window_is_unscored():
     shapes = contours(90, bend=0.4)
     ((_, alone),) = feed(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 0, shapes)
     far = alone.score / math.exp(2.0 * JOINED_MARGIN_LN)  # far below the score: no margin rule applies
     opens = round(alone.shape.trace[0].stamp * FPS)
-    merged = [widened(c) if opens <= i < opens + 3 else c for i, c in enumerate(shapes)]
-    verdict = beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), merged)
-    assert verdict.shape.rejected_frames == 3 and verdict.shape.joined_at_line and verdict.label == "normal"
-    gap = frozenset({opens + 1, opens + 2})
-    lost = beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), shapes, gap)
-    assert lost.shape.window_gap_s == pytest.approx(3 / FPS) and lost.label == "normal"
+    for merged, label in ((JOINED_MERGED_FRAMES - 1, "normal"), (JOINED_MERGED_FRAMES, "unscored")):
+        frames = [widened(c) if opens <= i < opens + merged else c for i, c in enumerate(shapes)]
+        verdict = beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), frames)
+        assert verdict.shape.rejected_frames == merged and verdict.label == label
+    assert verdict.reason.startswith(f"outline joined a neighbour's through its window ({merged} frames merged, "
+                                     "0.000 s of frames lost)")
+    assert feed(FilletGrader(EDGE, GradingRules(threshold=far)), 1, 0, frames)[0][1].label == "normal"  # not joined
+
+
+def test_a_fillet_graded_normal_on_frames_split_from_a_neighbour_in_a_window_with_frames_lost_is_unscored():
+    shapes = contours(90, bend=0.4)
+    ((_, alone),) = feed(FilletGrader(EDGE, GradingRules(threshold=1.0)), 1, 0, shapes)
+    far = alone.score / math.exp(2.0 * JOINED_MARGIN_LN)  # far below the score: no margin rule applies
+    opens = round(alone.shape.trace[0].stamp * FPS)
+    lost = frozenset({opens + 1, opens + 2})
+    verdict = beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), shapes, lost)
+    assert verdict.label == "unscored" and verdict.shape.window_gap_s == pytest.approx(3 / FPS)
+    assert verdict.reason.startswith("outline joined a neighbour's through its window (0 frames merged, 0.100 s")
+    assert beside_a_neighbour(FilletGrader(EDGE, GradingRules(threshold=far)), shapes).label == "normal"
 
 
 def merged_around_the_point(shapes, threshold: float, before: int = 4, past: int | None = 2) -> GradedFillet:

@@ -150,6 +150,17 @@ one such fillet in ten. Chosen on one set of live runs and checked on a disjoint
 REASON_JOINED = ("outline split from a neighbour's at the measuring point, score {:.2f} within {:.0%} of the cut "
                  "{:.2f}")
 
+JOINED_MERGED_FRAMES = 3
+"""A fillet graded normal on frames split from a neighbour's outline at the measuring point, in a window where at
+least this many frames (0.1 s at 30 Hz) were rejected as merged with a neighbour, or where frames of it were lost
+(its track saw only the joined blob's other part), is unscored whatever its score: it lay joined to the neighbour
+through much of its window, and the split hands pieces of the outline to one or the other, so its score says
+little. Chosen on one set of live runs and checked on disjoint ones (docs/results.md)."""
+
+REASON_JOINED_THROUGH = ("outline joined a neighbour's through its window ({} frames merged, {:.3f} s of frames lost) "
+                         "and split from it at the measuring point")
+
+
 @dataclass(frozen=True)
 class _Pending:
     fillet_id: int
@@ -405,9 +416,14 @@ class FilletGrader:
 
 def _joined_doubt(result: ShapeResult, score: float, threshold: float) -> str:
     """Why a normal score read on frames split from a neighbour's outline cannot pass the fillet ('' when it can):
-    it lies within JOINED_MARGIN_LN above the cut."""
-    if result.joined_at_line and math.log(score / threshold) < JOINED_MARGIN_LN:
+    it lies within JOINED_MARGIN_LN above the cut, or the window was merged over JOINED_MERGED_FRAMES frames or
+    lost frames."""
+    if not result.joined_at_line:
+        return ""
+    if math.log(score / threshold) < JOINED_MARGIN_LN:
         return REASON_JOINED.format(score, math.expm1(JOINED_MARGIN_LN), threshold)
+    if result.rejected_frames >= JOINED_MERGED_FRAMES or result.window_gap_s > 0.0:
+        return REASON_JOINED_THROUGH.format(result.rejected_frames, result.window_gap_s)
     return ""
 
 
